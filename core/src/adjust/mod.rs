@@ -1,0 +1,1 @@
+//! Intersection, resection and incremental bundle adjustment (issue 5).

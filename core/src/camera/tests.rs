@@ -1,0 +1,245 @@
+//! Camera model tests: round trips, known projections, analytic Jacobians
+//! against central differences, and the seed's normal-case example.
+use super::*;
+
+/// Deterministic uniform numbers for random states (no std RNG in the core).
+struct Lcg(u64);
+impl Lcg {
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        lo + (hi - lo) * ((self.0 >> 11) as f64 / (1u64 << 53) as f64)
+    }
+}
+
+/// Seed 000, Quadro 1, left camera, at the 576x384 format of its experiments.
+fn seed_camera() -> Interior {
+    Interior {
+        width_px: 576,
+        height_px: 384,
+        pixel_size_mm: [0.0387, 0.0387],
+        focal_mm: 34.6041,
+        principal_point_mm: [0.4171, -0.3096],
+        radial: [-3.3147e-05, 1.30582e-07],
+        decentering: [9.086e-05, -7.7278e-05],
+    }
+}
+
+fn close(a: f64, b: f64, tol: f64) -> bool {
+    (a - b).abs() <= tol * (1.0 + a.abs().max(b.abs()))
+}
+
+#[test]
+fn pixel_photo_round_trip_and_axes() {
+    let cam = seed_camera();
+    // The image centre is photo (0, 0); right is +x, up is +y.
+    assert_eq!(cam.pixel_to_photo(287.5, 191.5), [0.0, 0.0]);
+    let [x, y] = cam.pixel_to_photo(0.0, 0.0);
+    assert!(x < 0.0 && y > 0.0);
+    let mut rng = Lcg(1);
+    for _ in 0..100 {
+        let (c, r) = (rng.uniform(-5.0, 580.0), rng.uniform(-5.0, 390.0));
+        let [x, y] = cam.pixel_to_photo(c, r);
+        let [c2, r2] = cam.photo_to_pixel(x, y);
+        assert!(close(c, c2, 1e-12) && close(r, r2, 1e-12));
+    }
+}
+
+#[test]
+fn distortion_correction_round_trip() {
+    let cam = seed_camera();
+    let mut rng = Lcg(2);
+    for _ in 0..500 {
+        let (c, r) = (rng.uniform(0.0, 575.0), rng.uniform(0.0, 383.0));
+        let [x, y] = cam.pixel_to_photo(c, r);
+        let [xc, yc] = cam.correct(x, y);
+        let [x2, y2] = cam.uncorrect(xc, yc).unwrap();
+        assert!((x - x2).abs() < 1e-10 && (y - y2).abs() < 1e-10);
+    }
+    // Correction is not trivial for this lens: some micrometres at the corner.
+    let [x, y] = cam.pixel_to_photo(0.0, 0.0);
+    let [xc, _] = cam.correct(x, y);
+    assert!((xc - (x - cam.principal_point_mm[0])).abs() > 1e-3);
+}
+
+#[test]
+fn uncorrect_reports_divergence_instead_of_looping() {
+    let mut cam = seed_camera();
+    cam.radial = [1.0, 0.0]; // absurd lens: the correction folds over within the format
+    assert!(cam.uncorrect(50.0, 50.0).is_err());
+    assert_eq!(cam.uncorrect(f64::NAN, 0.0), Err(CameraError::NotFinite));
+}
+
+#[test]
+fn rotation_angles_round_trip_and_orthonormal() {
+    let mut rng = Lcg(3);
+    for _ in 0..200 {
+        let a = [rng.uniform(-3.1, 3.1), rng.uniform(-1.5, 1.5), rng.uniform(-3.1, 3.1)];
+        let m = rotation(a[0], a[1], a[2]);
+        assert!((m * m.transpose() - Matrix3::identity()).norm() < 1e-12);
+        assert!((m.determinant() - 1.0).abs() < 1e-12);
+        let b = angles_from_rotation(&m);
+        for k in 0..3 {
+            assert!(close(a[k], b[k], 1e-10), "{a:?} {b:?}");
+        }
+    }
+}
+
+#[test]
+fn level_camera_looks_along_plus_y() {
+    let pose = Pose::from_degrees(90.0, 0.0, 0.0, [0.0, 0.0, 0.0]);
+    let f = 10.0;
+    let ahead = project(&pose, f, &[0.0, 10.0, 0.0]).unwrap();
+    assert!(ahead[0].abs() < 1e-12 && ahead[1].abs() < 1e-12);
+    let right = project(&pose, f, &[1.0, 10.0, 0.0]).unwrap();
+    assert!(close(right[0], 1.0, 1e-12) && right[1].abs() < 1e-12);
+    let up = project(&pose, f, &[0.0, 10.0, 2.0]).unwrap();
+    assert!(close(up[1], 2.0, 1e-12) && up[0].abs() < 1e-12);
+    assert_eq!(project(&pose, f, &[0.0, -10.0, 0.0]), Err(CameraError::BehindCamera));
+}
+
+/// Seed 000 normal case: B = 0.40 m, f = 34.6041 mm, x' = 2 mm, x'' = 1 mm gives
+/// Y = B f / (x' - x'') = 13.84164 m and X = B x' / (x' - x'') = 0.8 m.
+#[test]
+fn seed_normal_case_intersection() {
+    let f = 34.6041;
+    let rig = Rig::rectified(Interior::pinhole_px(576, 384, f), 0.40);
+    let left = Pose::from_degrees(90.0, 0.0, 0.0, [0.0, 0.0, 0.0]);
+    let right = rig.right_pose(&left);
+    assert!((right.centre_vec() - Vector3::new(0.40, 0.0, 0.0)).norm() < 1e-15);
+    let (xl, xr) = (2.0, 1.0);
+    let y = rig.base_length() * f / (xl - xr);
+    let x = rig.base_length() * xl / (xl - xr);
+    assert!((y - 13.84164).abs() < 5e-6 && (x - 0.8).abs() < 1e-12);
+    // The collinearity model reproduces the measured photo-coordinates.
+    let p = [x, y, 0.0];
+    assert!(close(project(&left, f, &p).unwrap()[0], xl, 1e-12));
+    assert!(close(project(&right, f, &p).unwrap()[0], xr, 1e-12));
+}
+
+fn random_pose(rng: &mut Lcg) -> Pose {
+    Pose {
+        omega: rng.uniform(1.2, 1.9),
+        phi: rng.uniform(-0.4, 0.4),
+        kappa: rng.uniform(-0.4, 0.4),
+        centre: [rng.uniform(-5.0, 5.0), rng.uniform(-5.0, 5.0), rng.uniform(-1.0, 1.0)],
+    }
+}
+
+#[test]
+fn projection_jacobians_match_central_differences() {
+    let mut rng = Lcg(4);
+    let f = 34.6;
+    let h = 1e-6;
+    for _ in 0..200 {
+        let pose = random_pose(&mut rng);
+        // A point in front: along the viewing direction (-z of the camera) at 5..40 m.
+        let m = pose.rotation();
+        let dir = m.transpose() * Vector3::new(rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3), -1.0);
+        let p = pose.centre_vec() + dir * rng.uniform(5.0, 40.0);
+        let point = [p[0], p[1], p[2]];
+        let proj = project_with_jacobians(&pose, f, &point).unwrap();
+        assert_eq!(proj.xy, project(&pose, f, &point).unwrap());
+
+        let params = pose.to_params();
+        for k in 0..6 {
+            let (mut a, mut b) = (params, params);
+            a[k] += h;
+            b[k] -= h;
+            let pa = project(&Pose::from_params(&a), f, &point).unwrap();
+            let pb = project(&Pose::from_params(&b), f, &point).unwrap();
+            for i in 0..2 {
+                let num = (pa[i] - pb[i]) / (2.0 * h);
+                assert!(close(proj.d_pose[i][k], num, 1e-6), "pose {k} {i}: {} vs {num}", proj.d_pose[i][k]);
+            }
+        }
+        for k in 0..3 {
+            let (mut a, mut b) = (point, point);
+            a[k] += h;
+            b[k] -= h;
+            let pa = project(&pose, f, &a).unwrap();
+            let pb = project(&pose, f, &b).unwrap();
+            for i in 0..2 {
+                let num = (pa[i] - pb[i]) / (2.0 * h);
+                assert!(close(proj.d_point[i][k], num, 1e-6), "point {k} {i}");
+            }
+        }
+        let pa = project(&pose, f + h, &point).unwrap();
+        let pb = project(&pose, f - h, &point).unwrap();
+        for i in 0..2 {
+            assert!(close(proj.d_focal[i], (pa[i] - pb[i]) / (2.0 * h), 1e-6));
+        }
+    }
+}
+
+#[test]
+fn correction_jacobian_matches_central_differences() {
+    let base = seed_camera();
+    let mut rng = Lcg(5);
+    for _ in 0..200 {
+        let [x, y] = base.pixel_to_photo(rng.uniform(0.0, 575.0), rng.uniform(0.0, 383.0));
+        let jac = base.correction_jacobian(x, y);
+        // The correction is linear in k1, k2, p1, p2, so large steps are exact there.
+        let steps = [1e-6, 1e-6, 1e-4, 1e-6, 1e-4, 1e-4];
+        for (k, &h) in steps.iter().enumerate() {
+            let perturb = |s: f64| {
+                let mut c = base;
+                match k {
+                    io_param::X0 => c.principal_point_mm[0] += s,
+                    io_param::Y0 => c.principal_point_mm[1] += s,
+                    io_param::K1 => c.radial[0] += s,
+                    io_param::K2 => c.radial[1] += s,
+                    io_param::P1 => c.decentering[0] += s,
+                    _ => c.decentering[1] += s,
+                }
+                c.correct(x, y)
+            };
+            let (a, b) = (perturb(h), perturb(-h));
+            for i in 0..2 {
+                let num = (a[i] - b[i]) / (2.0 * h);
+                assert!(
+                    (jac[i][k] - num).abs() <= 1e-5 * (1.0 + num.abs()),
+                    "io {k} row {i}: {} vs {num}",
+                    jac[i][k]
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn right_camera_from_relative_orientation() {
+    let mut rig = Rig::rectified(seed_camera(), 0.4);
+    rig.relative_angles = [0.01, -0.02, 0.005];
+    let left = Pose::from_degrees(92.0, 1.0, -2.0, [1.0, 2.0, 3.0]);
+    let right = rig.right_pose(&left);
+    // The base vector expressed in the left camera frame is b, its length the base.
+    let b = left.rotation() * (right.centre_vec() - left.centre_vec());
+    assert!((b - Vector3::from(rig.base_m)).norm() < 1e-12);
+    let rel = right.rotation() * left.rotation().transpose();
+    assert!((rel - rig.relative_rotation()).norm() < 1e-12);
+}
+
+#[test]
+fn kitti_pose_round_trip_and_conventions() {
+    let origin = Pose::from_degrees(90.0, 0.0, 0.0, [0.0, 0.0, 0.0]);
+    // Identity at the origin.
+    let k0 = kitti_from_pose(&origin, &origin);
+    for (i, row) in k0.iter().enumerate() {
+        for (j, v) in row.iter().enumerate() {
+            let want = if i == j { 1.0 } else { 0.0 };
+            assert!((v - want).abs() < 1e-12);
+        }
+    }
+    // One metre forward (+Y) is +z in KITTI; one metre up is -y (KITTI y down).
+    let fwd = Pose { centre: [0.0, 1.0, 0.5], ..origin };
+    let k = kitti_from_pose(&origin, &fwd);
+    assert!((k[2][3] - 1.0).abs() < 1e-12 && (k[1][3] + 0.5).abs() < 1e-12);
+    let mut rng = Lcg(6);
+    for _ in 0..100 {
+        let o = random_pose(&mut rng);
+        let p = random_pose(&mut rng);
+        let back = pose_from_kitti(&o, &kitti_from_pose(&o, &p));
+        assert!((back.rotation() - p.rotation()).norm() < 1e-12);
+        assert!((back.centre_vec() - p.centre_vec()).norm() < 1e-12);
+    }
+}

@@ -1,0 +1,20 @@
+//! phototraverse core: the on-board processing of a photogrammetric traverse.
+//!
+//! `#![no_std]` and without `alloc`: every buffer is carved by the caller from a
+//! [`budget::Arena`] sized by a [`budget::MemoryBudget`] predicted from the
+//! configuration, so the same code runs on a microcontroller and on the host.
+//!
+//! Data flows one way through the modules, one per pipeline stage:
+//! [`image`] -> `sift` -> `matching` -> [`camera`] -> `adjust` -> `traverse`;
+//! `protocol` carries frames in and results out.
+#![no_std]
+#![forbid(unsafe_op_in_unsafe_fn)]
+
+pub mod adjust;
+pub mod budget;
+pub mod camera;
+pub mod features;
+pub mod image;
+pub mod matching;
+pub mod protocol;
+pub mod sift;

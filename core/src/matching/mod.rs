@@ -1,0 +1,1 @@
+//! Stereo and temporal matching, quad tie points and tracks (issue 4).

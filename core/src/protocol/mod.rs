@@ -1,0 +1,1 @@
+//! Serial framing protocol: COBS packets, header, CRC, messages (issue 6).

@@ -1,0 +1,1 @@
+//! Reduced SIFT over integer buffers (issue 3).

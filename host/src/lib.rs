@@ -1,0 +1,3 @@
+//! phototraverse host: datasets, synthetic street sequences, evaluation, the
+//! emulated rig link and the CLI's commands.
+pub mod commands;

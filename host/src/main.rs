@@ -1,0 +1,51 @@
+//! `phototraverse`: the host runner's command line.
+use clap::{Parser, Subcommand};
+use phototraverse_host::commands;
+
+/// Photogrammetric traverse for a forward-looking stereo rig: orients every
+/// image of a stereo sequence from the images alone, on a no_std core that runs
+/// behind an emulated serial link exactly as it would on board.
+#[derive(Parser)]
+#[command(name = "phototraverse", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Synthesize the default street, run it through the firmware and summarise.
+    Demo(commands::demo::Args),
+    /// Orient a stereo sequence (KITTI or rig.toml layout) and write poses, EOPs, points, report.
+    Run(commands::run::Args),
+    /// Render a synthetic street sequence with ground truth.
+    Synth(commands::synth::Args),
+    /// Compare an estimated trajectory with ground truth (KITTI drift, ATE).
+    Eval(commands::eval::Args),
+    /// Extract reduced SIFT features of one image (COLMAP text format).
+    Features(commands::features::Args),
+    /// Stereo tie points between a left and a right image.
+    Match(commands::match_pair::Args),
+    /// Bundle adjustment of a block described in files.
+    Adjust(commands::adjust::Args),
+    /// Memory budget of a configuration and image size.
+    Budget(commands::budget::Args),
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Demo(a) => commands::demo::run(a),
+        Command::Run(a) => commands::run::run(a),
+        Command::Synth(a) => commands::synth::run(a),
+        Command::Eval(a) => commands::eval::run(a),
+        Command::Features(a) => commands::features::run(a),
+        Command::Match(a) => commands::match_pair::run(a),
+        Command::Adjust(a) => commands::adjust::run(a),
+        Command::Budget(a) => commands::budget::run(a),
+    };
+    if let Err(err) = result {
+        eprintln!("phototraverse: error: {err:#}");
+        std::process::exit(1);
+    }
+}

@@ -1,0 +1,7 @@
+//! Shared helpers of the end-to-end tests (fixture paths).
+use std::path::PathBuf;
+
+/// `tests/fixtures/NAME` inside the repository.
+pub fn fixture(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("fixtures").join(name)
+}
