@@ -1,3 +1,7 @@
 //! phototraverse host: datasets, synthetic street sequences, evaluation, the
 //! emulated rig link and the CLI's commands.
 pub mod commands;
+pub mod dataset;
+pub mod eval;
+pub mod poses;
+pub mod synth;
