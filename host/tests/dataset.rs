@@ -3,7 +3,8 @@ use image::{GrayImage, ImageBuffer, Luma, Rgb, RgbImage};
 use phototraverse_host::dataset::{load_gray, Dataset, DatasetError, Layout};
 use std::path::Path;
 
-const CALIB: &str = "P0: 500 0 15.5 0 0 500 11.5 0 0 0 1 0\nP1: 500 0 15.5 -470 0 500 11.5 0 0 0 1 0\n";
+const CALIB: &str =
+    "P0: 500 0 15.5 0 0 500 11.5 0 0 0 1 0\nP1: 500 0 15.5 -470 0 500 11.5 0 0 0 1 0\n";
 
 const RIG: &str = r#"
 [left]
@@ -43,8 +44,12 @@ fn kitti(dir: &Path, n: usize) {
     std::fs::create_dir_all(dir.join("image_1")).unwrap();
     std::fs::write(dir.join("calib.txt"), CALIB).unwrap();
     for k in 0..n {
-        gray(32, 24, k as u8).save(dir.join(format!("image_0/{k:06}.png"))).unwrap();
-        gray(32, 24, 100 + k as u8).save(dir.join(format!("image_1/{k:06}.png"))).unwrap();
+        gray(32, 24, k as u8)
+            .save(dir.join(format!("image_0/{k:06}.png")))
+            .unwrap();
+        gray(32, 24, 100 + k as u8)
+            .save(dir.join(format!("image_1/{k:06}.png")))
+            .unwrap();
     }
 }
 
@@ -53,8 +58,12 @@ fn rig(dir: &Path, n: usize) {
     std::fs::create_dir_all(dir.join("right")).unwrap();
     std::fs::write(dir.join("rig.toml"), RIG).unwrap();
     for k in 0..n {
-        gray(32, 24, k as u8).save(dir.join(format!("left/E{:03}.png", k + 1))).unwrap();
-        gray(32, 24, 50 + k as u8).save(dir.join(format!("right/D{:03}.png", k + 1))).unwrap();
+        gray(32, 24, k as u8)
+            .save(dir.join(format!("left/E{:03}.png", k + 1)))
+            .unwrap();
+        gray(32, 24, 50 + k as u8)
+            .save(dir.join(format!("right/D{:03}.png", k + 1)))
+            .unwrap();
     }
 }
 
@@ -89,15 +98,22 @@ fn opens_rig_layout_with_seed_names() {
     rig(t.path(), 2);
     let d = Dataset::open(t.path()).unwrap();
     assert_eq!(d.layout, Layout::Rig);
-    assert_eq!(d.epochs.iter().map(|e| e.name.as_str()).collect::<Vec<_>>(), ["001", "002"]);
+    assert_eq!(
+        d.epochs.iter().map(|e| e.name.as_str()).collect::<Vec<_>>(),
+        ["001", "002"]
+    );
     assert!((d.datum.omega.to_degrees() - 91.0).abs() < 1e-12);
     assert_eq!(d.datum.centre, [1.0, 2.0, 3.0]);
     // Seed-style files side by side in the dataset directory.
     let t2 = tempfile::tempdir().unwrap();
     std::fs::write(t2.path().join("rig.toml"), RIG).unwrap();
     for k in 1..=2 {
-        gray(32, 24, k).save(t2.path().join(format!("E{k:03}.png"))).unwrap();
-        gray(32, 24, k).save(t2.path().join(format!("D{k:03}.png"))).unwrap();
+        gray(32, 24, k)
+            .save(t2.path().join(format!("E{k:03}.png")))
+            .unwrap();
+        gray(32, 24, k)
+            .save(t2.path().join(format!("D{k:03}.png")))
+            .unwrap();
     }
     assert_eq!(Dataset::open(t2.path()).unwrap().len(), 2);
 }
@@ -108,24 +124,37 @@ fn missing_right_image() {
     kitti(t.path(), 3);
     std::fs::remove_file(t.path().join("image_1/000001.png")).unwrap();
     let e = err(t.path());
-    assert!(e.contains("image_0/000001.png") && e.contains("missing right image for epoch `000001`"), "{e}");
+    assert!(
+        e.contains("image_0/000001.png") && e.contains("missing right image for epoch `000001`"),
+        "{e}"
+    );
     let t = tempfile::tempdir().unwrap();
     rig(t.path(), 2);
     std::fs::remove_file(t.path().join("left/E002.png")).unwrap();
     let e = err(t.path());
-    assert!(e.contains("right/D002.png") && e.contains("without a left image"), "{e}");
+    assert!(
+        e.contains("right/D002.png") && e.contains("without a left image"),
+        "{e}"
+    );
 }
 
 #[test]
 fn sizes_that_differ() {
     let t = tempfile::tempdir().unwrap();
     kitti(t.path(), 2);
-    gray(30, 24, 0).save(t.path().join("image_1/000001.png")).unwrap();
+    gray(30, 24, 0)
+        .save(t.path().join("image_1/000001.png"))
+        .unwrap();
     let e = err(t.path());
-    assert!(e.contains("image_1/000001.png") && e.contains("size 30x24 differs from 32x24"), "{e}");
+    assert!(
+        e.contains("image_1/000001.png") && e.contains("size 30x24 differs from 32x24"),
+        "{e}"
+    );
     let t = tempfile::tempdir().unwrap();
     rig(t.path(), 1);
-    gray(32, 20, 0).save(t.path().join("left/E001.png")).unwrap();
+    gray(32, 20, 0)
+        .save(t.path().join("left/E001.png"))
+        .unwrap();
     let e = err(t.path());
     assert!(e.contains("left/E001.png") && e.contains("rig.toml"), "{e}");
 }
@@ -136,11 +165,18 @@ fn unreadable_file() {
     kitti(t.path(), 2);
     std::fs::write(t.path().join("image_0/000001.png"), b"not a png at all").unwrap();
     let e = err(t.path());
-    assert!(e.contains("image_0/000001.png") && e.contains("unreadable image"), "{e}");
+    assert!(
+        e.contains("image_0/000001.png") && e.contains("unreadable image"),
+        "{e}"
+    );
     // load_gray names the file too.
-    let e = load_gray(&t.path().join("image_0/000001.png")).unwrap_err().to_string();
+    let e = load_gray(&t.path().join("image_0/000001.png"))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("000001.png"), "{e}");
-    let e = load_gray(&t.path().join("nope.png")).unwrap_err().to_string();
+    let e = load_gray(&t.path().join("nope.png"))
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("nope.png") && e.contains("cannot read"), "{e}");
 }
 
@@ -148,10 +184,21 @@ fn unreadable_file() {
 fn bad_calib_line() {
     let t = tempfile::tempdir().unwrap();
     kitti(t.path(), 1);
-    std::fs::write(t.path().join("calib.txt"), "P0: 500 0 15.5 0 0 500 11.5 0 0 0 1 0\nP1: 500 0 15.5 -470 0 500\n").unwrap();
+    std::fs::write(
+        t.path().join("calib.txt"),
+        "P0: 500 0 15.5 0 0 500 11.5 0 0 0 1 0\nP1: 500 0 15.5 -470 0 500\n",
+    )
+    .unwrap();
     let e = err(t.path());
-    assert!(e.contains("calib.txt") && e.contains("line 2") && e.contains("bad calibration line"), "{e}");
-    std::fs::write(t.path().join("calib.txt"), "P0: 0 0 15.5 0 0 500 11.5 0 0 0 1 0\nP1: 500 0 15.5 -470 0 500 11.5 0 0 0 1 0\n").unwrap();
+    assert!(
+        e.contains("calib.txt") && e.contains("line 2") && e.contains("bad calibration line"),
+        "{e}"
+    );
+    std::fs::write(
+        t.path().join("calib.txt"),
+        "P0: 0 0 15.5 0 0 500 11.5 0 0 0 1 0\nP1: 500 0 15.5 -470 0 500 11.5 0 0 0 1 0\n",
+    )
+    .unwrap();
     let e = err(t.path());
     assert!(e.contains("non-positive focal length"), "{e}");
 }
@@ -160,12 +207,23 @@ fn bad_calib_line() {
 fn missing_rig_key_and_bad_focal() {
     let t = tempfile::tempdir().unwrap();
     rig(t.path(), 1);
-    std::fs::write(t.path().join("rig.toml"), RIG.replacen("base_mm = [940.0, 0.0, 0.0]\n", "", 1)).unwrap();
+    std::fs::write(
+        t.path().join("rig.toml"),
+        RIG.replacen("base_mm = [940.0, 0.0, 0.0]\n", "", 1),
+    )
+    .unwrap();
     let e = err(t.path());
     assert!(e.contains("rig.toml") && e.contains("base_mm"), "{e}");
-    std::fs::write(t.path().join("rig.toml"), RIG.replacen("focal_mm = 5.0", "focal_mm = -5.0", 1)).unwrap();
+    std::fs::write(
+        t.path().join("rig.toml"),
+        RIG.replacen("focal_mm = 5.0", "focal_mm = -5.0", 1),
+    )
+    .unwrap();
     let e = err(t.path());
-    assert!(e.contains("left camera") && e.contains("non-positive focal length"), "{e}");
+    assert!(
+        e.contains("left camera") && e.contains("non-positive focal length"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -174,7 +232,10 @@ fn wrong_counts_of_times_and_poses() {
     kitti(t.path(), 2);
     std::fs::write(t.path().join("times.txt"), "0.0\n").unwrap();
     let e = err(t.path());
-    assert!(e.contains("times.txt") && e.contains("1 lines for 2 epochs"), "{e}");
+    assert!(
+        e.contains("times.txt") && e.contains("1 lines for 2 epochs"),
+        "{e}"
+    );
     std::fs::write(t.path().join("times.txt"), "0.0\nabc\n").unwrap();
     assert!(err(t.path()).contains("`abc` is not a number"));
     std::fs::remove_file(t.path().join("times.txt")).unwrap();
@@ -191,13 +252,30 @@ fn not_a_dataset() {
 #[test]
 fn sixteen_bit_and_colour_images_become_8_bit_gray() {
     let t = tempfile::tempdir().unwrap();
-    let g16: ImageBuffer<Luma<u16>, Vec<u16>> = ImageBuffer::from_fn(4, 2, |x, y| Luma([(x * 16000 + y * 300) as u16]));
+    let g16: ImageBuffer<Luma<u16>, Vec<u16>> =
+        ImageBuffer::from_fn(4, 2, |x, y| Luma([(x * 16000 + y * 300) as u16]));
     g16.save(t.path().join("a.png")).unwrap();
     let g = load_gray(&t.path().join("a.png")).unwrap();
     assert_eq!((g.width, g.height), (4, 2));
-    assert_eq!(g.data[..4], [0, (16000u32 >> 8) as u8, (32000u32 >> 8) as u8, (48000u32 >> 8) as u8]);
+    assert_eq!(
+        g.data[..4],
+        [
+            0,
+            (16000u32 >> 8) as u8,
+            (32000u32 >> 8) as u8,
+            (48000u32 >> 8) as u8
+        ]
+    );
     assert_eq!(g.data[4], (300u32 >> 8) as u8);
-    let rgb: RgbImage = ImageBuffer::from_fn(3, 1, |x, _| if x == 0 { Rgb([255, 255, 255]) } else if x == 1 { Rgb([0, 0, 0]) } else { Rgb([0, 255, 0]) });
+    let rgb: RgbImage = ImageBuffer::from_fn(3, 1, |x, _| {
+        if x == 0 {
+            Rgb([255, 255, 255])
+        } else if x == 1 {
+            Rgb([0, 0, 0])
+        } else {
+            Rgb([0, 255, 0])
+        }
+    });
     rgb.save(t.path().join("c.png")).unwrap();
     let g = load_gray(&t.path().join("c.png")).unwrap();
     assert_eq!(g.data[0], 255);

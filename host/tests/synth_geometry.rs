@@ -43,7 +43,11 @@ fn max_disc_error(cam: &Interior, pose: &Pose, radius_px: f64) -> (f64, usize) {
             let radius = radius_px * depth / f_px;
             let normal = (c - p).normalize();
             scene.prims.push(Primitive {
-                shape: Shape::Disc { centre: p, normal, radius },
+                shape: Shape::Disc {
+                    centre: p,
+                    normal,
+                    radius,
+                },
                 material: Material::Emissive { value: 1.0 },
                 flat: false,
                 group: targets.len() as u32,
@@ -74,7 +78,15 @@ fn max_disc_error(cam: &Interior, pose: &Pose, radius_px: f64) -> (f64, usize) {
 
 #[test]
 fn discs_render_at_their_projection_without_distortion() {
-    let cam = Interior { width_px: 640, height_px: 480, pixel_size_mm: [0.01, 0.01], focal_mm: 5.0, principal_point_mm: [0.0; 2], radial: [0.0; 2], decentering: [0.0; 2] };
+    let cam = Interior {
+        width_px: 640,
+        height_px: 480,
+        pixel_size_mm: [0.01, 0.01],
+        focal_mm: 5.0,
+        principal_point_mm: [0.0; 2],
+        radial: [0.0; 2],
+        decentering: [0.0; 2],
+    };
     let pose = Pose::from_degrees(91.3, -2.0, 4.0, [1.0, -3.0, 1.6]);
     let (err, n) = max_disc_error(&cam, &pose, 3.0);
     println!("pinhole 640x480: max centroid error {err:.4} px over {n} discs");
@@ -117,8 +129,12 @@ fn depth_maps_give_true_stereo_correspondences() {
                 continue;
             }
             let [xc, yc] = rig.left.pixel_to_corrected(col as f64, row as f64);
-            let p = c + m.transpose() * V3::new(xc, yc, -rig.left.focal_mm) * (z / rig.left.focal_mm);
-            let Ok([pc, pr]) = project_to_pixel(&right_pose, &rig.right, &[p[0], p[1], p[2]]) else { continue };
+            let p =
+                c + m.transpose() * V3::new(xc, yc, -rig.left.focal_mm) * (z / rig.left.focal_mm);
+            let Ok([pc, pr]) = project_to_pixel(&right_pose, &rig.right, &[p[0], p[1], p[2]])
+            else {
+                continue;
+            };
             let (ic, ir) = (pc.round() as isize, pr.round() as isize);
             if ic < 1 || ir < 1 || ic as usize >= r.width - 1 || ir as usize >= r.height - 1 {
                 continue;
@@ -133,7 +149,10 @@ fn depth_maps_give_true_stereo_correspondences() {
     diffs.sort_by(f32::total_cmp);
     shifted.sort_by(f32::total_cmp);
     let (med, med_shift) = (diffs[diffs.len() / 2], shifted[shifted.len() / 2]);
-    println!("{} correspondences: median |L - R| {med:.4}, 5 px off {med_shift:.4}", diffs.len());
+    println!(
+        "{} correspondences: median |L - R| {med:.4}, 5 px off {med_shift:.4}",
+        diffs.len()
+    );
     assert!(diffs.len() > 2000);
     // Rounding to the nearest pixel leaves a little texture difference; a wrong match leaves much more.
     assert!(med < 0.02 && med < med_shift / 3.0, "{med} vs {med_shift}");

@@ -24,7 +24,15 @@ pub struct Args {
 }
 
 fn to_m(p: &KittiPose) -> Matrix4<f64> {
-    Matrix4::from_fn(|i, j| if i < 3 { p[i][j] } else if j == 3 { 1.0 } else { 0.0 })
+    Matrix4::from_fn(|i, j| {
+        if i < 3 {
+            p[i][j]
+        } else if j == 3 {
+            1.0
+        } else {
+            0.0
+        }
+    })
 }
 
 fn from_m(m: &Matrix4<f64>) -> KittiPose {
@@ -76,7 +84,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     println!("\nbaseline (constant velocity from the first step) vs ground truth:");
     print!("{}", e.summary());
     let json = a.out.join("baseline_eval.json");
-    std::fs::write(&json, serde_json::to_string_pretty(&e)? + "\n").with_context(|| json.display().to_string())?;
+    std::fs::write(&json, serde_json::to_string_pretty(&e)? + "\n")
+        .with_context(|| json.display().to_string())?;
     println!("\nwrote {} and {}", est_path.display(), json.display());
     Ok(())
 }

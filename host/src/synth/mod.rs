@@ -138,7 +138,7 @@ pub fn generate(opts: &SynthOptions) -> anyhow::Result<SynthSummary> {
     let gt: Vec<KittiPose> = poses.iter().map(|p| kitti_from_pose(&origin, p)).collect();
     write_poses(&out.join(GT_FILE), &gt)?;
     let times: String = (0..plan.frames)
-        .map(|k| format!("{:e}\n", k as f64 * plan.dt))
+        .map(|k| format!("{:.6}\n", k as f64 * plan.dt))
         .collect();
     std::fs::write(out.join(TIMES_FILE), times)?;
 
