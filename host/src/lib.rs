@@ -4,4 +4,5 @@ pub mod commands;
 pub mod dataset;
 pub mod eval;
 pub mod poses;
+pub mod report;
 pub mod synth;
