@@ -167,7 +167,9 @@ fn ground(segment: u32, s: &Surface) -> f64 {
         return base * (1.0 - kerb) + 0.7 * kerb;
     }
     // Asphalt: multi-scale grain, repair patches, tyre darkening.
-    let grain = fbm(x, y, 13, 1.5, 6, 0.75, fp);
+    // Aggregate: one fine octave (2 cm stones) on top of the band-limited fBm.
+    let stones = band_weight(0.02, fp) * value2(x * 50.0, y * 50.0, 17);
+    let grain = fbm(x, y, 13, 1.5, 5, 0.75, fp) + 0.5 * stones;
     let patch = value2(x / 7.0, y / 7.0, 29);
     let patch = if patch > 0.45 { 0.8 } else { 1.0 };
     let tyre = 1.0 - 0.08 * (stripe(ad - 1.75 + 0.8, 0.35, fp) + stripe(ad - 1.75 - 0.8, 0.35, fp));
