@@ -23,7 +23,7 @@
 
 use super::cholesky;
 use super::constraints::{base_length, distance, prior_residual, smoothness};
-use super::geometry::{project_rig, Camera, RigParams};
+use super::geometry::{project_rig, project_with, Camera, RigParams, Rotations};
 use super::quality::ChiSquareTest;
 use super::weighting::{cauchy_factor, median, CHI2_2_MEDIAN, SEED_REWEIGHT};
 use crate::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget, OutOfMemory};
@@ -234,6 +234,8 @@ struct EpochSlot {
     odometer: f64,
     odometer_sigma: f64,
     time: f64,
+    /// Cached rotation and derivatives of `params` (see [`Rotations`]).
+    rot: [f64; 36],
     id: u32,
     flags: u32,
 }
@@ -316,6 +318,7 @@ pub struct Window<'a> {
     nominal_base: f64,
     focal: [f64; 2],
     rig_std: [f64; 6],
+    rig_rot: Rotations,
     origin: [f64; 3],
     epochs: &'a mut [EpochSlot],
     n_epochs: usize,
@@ -452,6 +455,7 @@ impl<'a> Window<'a> {
             nominal_base: rig.base_length(),
             focal: [rig.left.focal_mm, rig.right.focal_mm],
             rig_std: [0.0; 6],
+            rig_rot: Rotations::new(r.angles[0], r.angles[1], r.angles[2]),
             origin: [0.0; 3],
             epochs,
             n_epochs: 0,
@@ -891,6 +895,36 @@ impl<'a> Window<'a> {
         6 * (self.n_epochs + self.cfg.estimate_rig as usize)
     }
 
+    /// Projection through the cached rotations of epoch `slot` and the rig.
+    fn project(
+        &self,
+        slot: usize,
+        cam: Camera,
+        xyz: &[f64; 3],
+    ) -> Result<super::geometry::RigProjection, crate::camera::CameraError> {
+        let e = &self.epochs[slot];
+        let c = [e.params[3], e.params[4], e.params[5]];
+        let f = self.focal[cam as usize];
+        project_with(
+            &Rotations(e.rot),
+            &c,
+            &self.rig_rot,
+            &self.rig.base,
+            cam,
+            f,
+            xyz,
+        )
+    }
+
+    /// Recomputes the cached rotations after the parameters changed.
+    fn refresh_rotations(&mut self) {
+        for e in self.epochs[..self.n_epochs].iter_mut() {
+            e.rot = Rotations::new(e.params[0], e.params[1], e.params[2]).0;
+        }
+        let a = self.rig.angles;
+        self.rig_rot = Rotations::new(a[0], a[1], a[2]);
+    }
+
     /// Groups the observations by point (counting sort).
     fn build_index(&mut self) {
         let np = self.n_point_slots;
@@ -957,8 +991,7 @@ impl<'a> Window<'a> {
             } else {
                 Camera::Right
             };
-            let pose = Pose::from_params(&self.epochs[slot].params);
-            let pr = match project_rig(&pose, &self.rig, cam, self.focal[o.camera as usize], &xyz) {
+            let pr = match self.project(slot, cam, &xyz) {
                 Ok(pr) => pr,
                 Err(_) => {
                     self.obs[oi].flags |= Observation::BEHIND;
@@ -1081,6 +1114,7 @@ impl<'a> Window<'a> {
     /// The reduced camera system `S dc = rhs` (lower triangle, undamped
     /// camera diagonal, points damped by `lambda`) into `reduced` and `rhs`.
     fn build(&mut self, lambda: f64) {
+        self.refresh_rotations();
         let nc = self.n_cam();
         let rig_block = self.rig_block();
         self.reduced[..nc * nc].fill(0.0);
@@ -1179,6 +1213,7 @@ impl<'a> Window<'a> {
     /// Decides which points take part (two rays or more, not at infinity)
     /// before an iteration sequence, so costs compare like with like.
     fn classify_points(&mut self) {
+        self.refresh_rotations();
         for p in 0..self.n_point_slots {
             if self.points[p].flags & PT_USED == 0 {
                 continue;
@@ -1333,6 +1368,7 @@ impl<'a> Window<'a> {
 
     /// `vTPv` at the current state, constraints included.
     fn cost(&mut self) -> (f64, usize) {
+        self.refresh_rotations();
         let mut cost = 0.0;
         let mut behind = 0;
         for p in 0..self.n_point_slots {
@@ -1541,6 +1577,7 @@ impl<'a> Window<'a> {
     /// on the median scale; excludes those beyond `critical`. Returns whether
     /// the excluded set changed.
     fn snoop(&mut self, critical: f64, round: usize) -> bool {
+        self.refresh_rotations();
         // Statistic per observation into residuals[].
         for p in 0..self.n_point_slots {
             if self.points[p].flags & PT_USED == 0 {
@@ -1620,9 +1657,8 @@ impl<'a> Window<'a> {
         } else {
             Camera::Right
         };
-        let pose = Pose::from_params(&self.epochs[slot].params);
         let xyz = self.points[o.point as usize].xyz;
-        let Ok(pr) = project_rig(&pose, &self.rig, cam, self.focal[o.camera as usize], &xyz) else {
+        let Ok(pr) = self.project(slot, cam, &xyz) else {
             return f64::INFINITY;
         };
         let r = [o.xy[0] - pr.xy[0], o.xy[1] - pr.xy[1]];
