@@ -1504,6 +1504,23 @@ impl<'a> Window<'a> {
                 report.robust_rounds = 1;
             }
             Robust::Snooping { critical } => {
+                let (it, conv) = self.least_squares(max_it)?;
+                report.iterations += it;
+                report.converged = conv;
+                if !self.detection_passes()? {
+                    self.identify(critical, &mut report)?;
+                }
+            }
+        }
+        self.quality(&mut report)?;
+        Ok(report)
+    }
+
+    /// Identification: Cauchy re-weighting, then data snooping until stable.
+    fn identify(&mut self, critical: f64, report: &mut Report) -> Result<(), AdjustError> {
+        let max_it = self.cfg.max_iterations;
+        {
+            {
                 // Cauchy re-weighting on a median scale: blunders lose their pull.
                 for _ in 0..self.cfg.max_robust_rounds {
                     let (it, _) = self.least_squares(max_it.min(10))?;
@@ -1538,8 +1555,7 @@ impl<'a> Window<'a> {
                 }
             }
         }
-        self.quality(&mut report)?;
-        Ok(report)
+        Ok(())
     }
 
     /// Standardised 2-D residual `sqrt(v^T P v)` of every observation into `residuals`.
@@ -1577,8 +1593,43 @@ impl<'a> Window<'a> {
     /// on the median scale; excludes those beyond `critical`. Returns whether
     /// the excluded set changed.
     fn snoop(&mut self, critical: f64, round: usize) -> bool {
+        self.statistics();
+        let n = self.n_obs;
+        let mut m = 0;
+        for i in 0..n {
+            if self.obs[i].factor > 0.0 && self.residuals[i].is_finite() {
+                self.work[m] = self.residuals[i];
+                m += 1;
+            }
+        }
+        // Median scale: 1 when the weights match the noise, and right also
+        // with the seed's weights whose scale is arbitrary.
+        let scale2 = (median(&mut self.work[..m]) / CHI2_2_MEDIAN).max(1e-30);
+        self.apply_flags(critical, round, scale2)
+    }
+
+    /// Detection (Baarda's DIA order): after plain least squares, the data are
+    /// accepted without any exclusion when the global test passes and the
+    /// largest `T` stays below the Bonferroni bound `-2 ln(0.05 / n)` (5 % for
+    /// the whole set); otherwise the robust identification runs.
+    fn detection_passes(&mut self) -> Result<bool, AdjustError> {
+        let mut r = Report::default();
+        self.quality(&mut r)?;
+        if !r.chi2.passed {
+            return Ok(false);
+        }
+        self.statistics();
+        let n = self.n_obs.max(1) as f64;
+        let bound = -2.0 * libm::log(0.05 / n);
+        let worst = self.residuals[..self.n_obs]
+            .iter()
+            .fold(0.0f64, |m, t| m.max(*t));
+        Ok(worst <= bound)
+    }
+
+    /// `T` of every observation into `residuals` (a-priori scale).
+    fn statistics(&mut self) {
         self.refresh_rotations();
-        // Statistic per observation into residuals[].
         for p in 0..self.n_point_slots {
             if self.points[p].flags & PT_USED == 0 {
                 continue;
@@ -1609,17 +1660,12 @@ impl<'a> Window<'a> {
                 self.residuals[oi] = self.statistic(oi, vinv.as_ref(), all);
             }
         }
+    }
+
+    /// Excludes/readmits observations from their `T` on the scale `scale2`;
+    /// returns whether the excluded set changed.
+    fn apply_flags(&mut self, critical: f64, round: usize, scale2: f64) -> bool {
         let n = self.n_obs;
-        let mut m = 0;
-        for i in 0..n {
-            if self.obs[i].factor > 0.0 && self.residuals[i].is_finite() {
-                self.work[m] = self.residuals[i];
-                m += 1;
-            }
-        }
-        // Median scale: 1 when the weights match the noise, and right also
-        // with the seed's weights whose scale is arbitrary.
-        let scale2 = (median(&mut self.work[..m]) / CHI2_2_MEDIAN).max(1e-30);
         let mut changed = false;
         for i in 0..n {
             let t = self.residuals[i] / scale2;
