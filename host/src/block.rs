@@ -296,7 +296,7 @@ impl Block {
             ],
             base_m: base,
         };
-        if !(rig.base_length() > 0.0) {
+        if rig.base_length() <= 0.0 {
             return Err(at(&bpath, 0, "the base must not be zero"));
         }
 
@@ -937,7 +937,7 @@ pub fn synthetic_block(
                 px[0] + 0.3 * normal(&mut rng),
                 px[1] + 0.3 * normal(&mut rng),
             ];
-            if blunder_every > 0 && count % blunder_every == 0 {
+            if blunder_every > 0 && count - (count / blunder_every) * blunder_every == 0 {
                 let mag = rng.gen_range(10.0..50.0);
                 let ang: f64 = rng.gen_range(0.0..std::f64::consts::TAU);
                 m[0] += mag * ang.cos();
