@@ -1042,3 +1042,33 @@ fn gnss_and_odometer_constraints_enter_the_adjustment() {
     let (ok, n) = within(&w, &s, &ids, 3.0);
     assert!(ok as f64 >= 0.99 * n as f64, "{ok}/{n}");
 }
+
+#[test]
+fn control_points_carry_a_loose_datum() {
+    // Datum almost free (0.1 rad, 1 m); eight control points at 5 mm fix the block.
+    let s = scene(61, 4, 200, 0.0);
+    let cfg = AdjustConfig {
+        window: 4,
+        max_points: 200,
+        max_observations: s.obs.len(),
+        sigmas: ConstraintSigmas { datum_angle_rad: 0.1, datum_position_m: 1.0, ..ConstraintSigmas::default() },
+        ..AdjustConfig::default()
+    };
+    let mut mem = arena_for(&cfg);
+    let mut arena = Arena::new(&mut mem);
+    let (mut w, ids) = load(&s, cfg, &mut arena, 62);
+    let mut rng = Rng(63);
+    for k in 0..8 {
+        let p = s.points[k * 20];
+        let c = [p[0] + 0.005 * rng.normal(), p[1] + 0.005 * rng.normal(), p[2] + 0.005 * rng.normal()];
+        w.set_point_prior(ids[k * 20], c, 0.005).unwrap();
+    }
+    assert_eq!(w.set_point_prior(9999, [0.0; 3], 1.0), Err(AdjustError::Unknown));
+    let r = w.solve().unwrap();
+    assert_eq!(r.constraints, 6 + 8 * 3);
+    assert!(r.chi2.passed, "{r:?}");
+    let (ok, n) = within(&w, &s, &ids, 3.0);
+    assert!(ok as f64 >= 0.99 * n as f64, "{ok}/{n}");
+    // The first epoch is now determined by the control (cm level), not by its 1 m prior.
+    assert!(w.epoch_std(0).unwrap()[3] < 0.05);
+}
