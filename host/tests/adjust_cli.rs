@@ -174,3 +174,45 @@ fn invalid_block_is_refused_naming_file_and_line() {
     let err = String::from_utf8_lossy(&run(&blk, &tmp.path().join("out")).stderr).to_string();
     assert!(err.contains("images.txt"), "{err}");
 }
+
+mod parser_properties {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+        /// Any text in place of one observation line is either read or refused
+        /// with an error naming observations.txt and that line; never a panic.
+        #[test]
+        fn any_observation_line_is_read_or_refused_with_its_line(line in "[ -~]{0,40}", at in 0usize..20) {
+            let tmp = tempfile::tempdir().unwrap();
+            let (block, _) = example();
+            block.write(tmp.path()).unwrap();
+            let path = tmp.path().join("observations.txt");
+            let text = std::fs::read_to_string(&path).unwrap();
+            let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+            lines[at + 1] = line.clone();
+            std::fs::write(&path, lines.join("\n")).unwrap();
+            if let Err(e) = Block::read(tmp.path()) {
+                let msg = format!("{e:#}");
+                prop_assert!(msg.contains(&format!("observations.txt:{}:", at + 2)), "{}", msg);
+            }
+        }
+
+        /// Any keyword line appended to block.txt is read or refused naming block.txt.
+        #[test]
+        fn any_block_line_is_read_or_refused(line in "[a-z_]{1,14}( [-0-9.e]{1,8}){0,12}") {
+            let tmp = tempfile::tempdir().unwrap();
+            let (block, _) = example();
+            block.write(tmp.path()).unwrap();
+            let path = tmp.path().join("block.txt");
+            let mut text = std::fs::read_to_string(&path).unwrap();
+            text.push_str(&line);
+            text.push('\n');
+            std::fs::write(&path, text).unwrap();
+            if let Err(e) = Block::read(tmp.path()) {
+                prop_assert!(format!("{e:#}").contains("block.txt:"), "{e:#}");
+            }
+        }
+    }
+}

@@ -1051,7 +1051,11 @@ fn control_points_carry_a_loose_datum() {
         window: 4,
         max_points: 200,
         max_observations: s.obs.len(),
-        sigmas: ConstraintSigmas { datum_angle_rad: 0.1, datum_position_m: 1.0, ..ConstraintSigmas::default() },
+        sigmas: ConstraintSigmas {
+            datum_angle_rad: 0.1,
+            datum_position_m: 1.0,
+            ..ConstraintSigmas::default()
+        },
         ..AdjustConfig::default()
     };
     let mut mem = arena_for(&cfg);
@@ -1060,10 +1064,17 @@ fn control_points_carry_a_loose_datum() {
     let mut rng = Rng(63);
     for k in 0..8 {
         let p = s.points[k * 20];
-        let c = [p[0] + 0.005 * rng.normal(), p[1] + 0.005 * rng.normal(), p[2] + 0.005 * rng.normal()];
+        let c = [
+            p[0] + 0.005 * rng.normal(),
+            p[1] + 0.005 * rng.normal(),
+            p[2] + 0.005 * rng.normal(),
+        ];
         w.set_point_prior(ids[k * 20], c, 0.005).unwrap();
     }
-    assert_eq!(w.set_point_prior(9999, [0.0; 3], 1.0), Err(AdjustError::Unknown));
+    assert_eq!(
+        w.set_point_prior(9999, [0.0; 3], 1.0),
+        Err(AdjustError::Unknown)
+    );
     let r = w.solve().unwrap();
     assert_eq!(r.constraints, 6 + 8 * 3);
     assert!(r.chi2.passed, "{r:?}");
@@ -1071,4 +1082,32 @@ fn control_points_carry_a_loose_datum() {
     assert!(ok as f64 >= 0.99 * n as f64, "{ok}/{n}");
     // The first epoch is now determined by the control (cm level), not by its 1 m prior.
     assert!(w.epoch_std(0).unwrap()[3] < 0.05);
+}
+
+#[test]
+fn absurd_configurations_give_a_budget_and_an_error_not_a_panic() {
+    for cfg in [
+        AdjustConfig {
+            window: usize::MAX,
+            max_points: usize::MAX,
+            max_observations: usize::MAX,
+            ..AdjustConfig::default()
+        },
+        AdjustConfig {
+            window: 5000,
+            ..AdjustConfig::default()
+        },
+        AdjustConfig {
+            max_points: 0,
+            ..AdjustConfig::default()
+        },
+    ] {
+        let mut b = MemoryBudget::new();
+        cfg.budget(&mut b);
+        assert!(b.total() > 0);
+        let mut mem = [0u8; 256];
+        let mut arena = Arena::new(&mut mem);
+        let rig = Rig::rectified(Interior::pinhole_px(100, 100, 100.0), 0.5);
+        assert!(Window::new(cfg, &rig, &mut arena).is_err());
+    }
 }

@@ -347,49 +347,55 @@ impl AdjustConfig {
         6 * (self.window + 1)
     }
 
-    /// Adds the adjustment's buffers ("adjust." prefix) to `budget`.
+    /// Adds the adjustment's buffers ("adjust." prefix) to `budget`. Sizes
+    /// saturate instead of overflowing, so an absurd configuration gives an
+    /// absurd budget (and `Window::new` refuses it), never a panic.
     pub fn budget(&self, budget: &mut MemoryBudget) {
-        let nc = self.cam_capacity();
+        let nc = 6usize.saturating_mul(self.window.saturating_add(1));
         let (p, o, w) = (self.max_points, self.max_observations, self.window);
+        let p1 = p.saturating_add(1);
+        let w1 = w.saturating_add(1);
         budget.add(
             "adjust.epochs",
             ComponentKind::Storage,
-            slice_bytes::<EpochSlot>(w),
+            bytes::<EpochSlot>(w),
         );
         budget.add(
             "adjust.points",
             ComponentKind::Storage,
-            slice_bytes::<PointSlot>(p),
+            bytes::<PointSlot>(p),
         );
         budget.add(
             "adjust.observations",
             ComponentKind::Storage,
-            slice_bytes::<Observation>(o),
+            bytes::<Observation>(o),
         );
         budget.add(
             "adjust.point_index",
             ComponentKind::Working,
-            slice_bytes::<u32>(p + 1) + slice_bytes::<u32>(o),
+            bytes::<u32>(p1).saturating_add(bytes::<u32>(o)),
         );
         budget.add(
             "adjust.reduced_normal",
             ComponentKind::Working,
-            slice_bytes::<f64>(nc * nc),
+            bytes::<f64>(nc.saturating_mul(nc)),
         );
         budget.add(
             "adjust.vectors",
             ComponentKind::Working,
-            2 * slice_bytes::<f64>(nc) + slice_bytes::<f64>(3 * p),
+            bytes::<f64>(nc)
+                .saturating_mul(2)
+                .saturating_add(bytes::<f64>(p.saturating_mul(3))),
         );
         budget.add(
             "adjust.point_scratch",
             ComponentKind::Working,
-            slice_bytes::<BlockScratch>(w + 1) + slice_bytes::<u32>(w + 1),
+            bytes::<BlockScratch>(w1).saturating_add(bytes::<u32>(w1)),
         );
         budget.add(
             "adjust.residuals",
             ComponentKind::Working,
-            2 * slice_bytes::<f64>(o),
+            bytes::<f64>(o).saturating_mul(2),
         );
     }
 
@@ -411,6 +417,17 @@ impl AdjustConfig {
         } else {
             Err(AdjustError::InvalidConfig)
         }
+    }
+}
+
+/// [`slice_bytes`] that saturates (at a sixteenth of the address space, so a
+/// few saturated components still sum without overflow).
+fn bytes<T>(n: usize) -> usize {
+    let cap = usize::MAX / 16;
+    if n > cap / core::mem::size_of::<T>().max(1) {
+        cap
+    } else {
+        slice_bytes::<T>(n)
     }
 }
 
