@@ -113,6 +113,29 @@ impl Rotations {
     }
 }
 
+/// Only the photo-coordinates (no Jacobians) with precomputed rotations;
+/// `None` behind the camera.
+pub fn project_xy(
+    left: &Rotations,
+    centre: &[f64; 3],
+    rel: &Rotations,
+    base: &[f64; 3],
+    camera: Camera,
+    focal_mm: f64,
+    point: &[f64; 3],
+) -> Option<[f64; 2]> {
+    let q = left.get(0) * (Vector3::from(*point) - Vector3::from(*centre));
+    let q = match camera {
+        Camera::Left => q,
+        Camera::Right => rel.get(0) * (q - Vector3::from(*base)),
+    };
+    let (u, v, w) = (q[0], q[1], q[2]);
+    if !(w < -MIN_DEPTH) || !(u.is_finite() && v.is_finite()) {
+        return None;
+    }
+    Some([-focal_mm * u / w, -focal_mm * v / w])
+}
+
 /// [`project_rig`] with precomputed rotations of the left camera and the rig.
 pub fn project_with(
     left: &Rotations,

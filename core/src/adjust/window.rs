@@ -23,7 +23,7 @@
 
 use super::cholesky;
 use super::constraints::{base_length, distance, prior_residual, smoothness};
-use super::geometry::{project_rig, project_with, Camera, RigParams, Rotations};
+use super::geometry::{project_rig, project_with, project_xy, Camera, RigParams, Rotations};
 use super::quality::ChiSquareTest;
 use super::weighting::{cauchy_factor, median, CHI2_2_MEDIAN, SEED_REWEIGHT};
 use crate::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget, OutOfMemory};
@@ -1388,13 +1388,52 @@ impl<'a> Window<'a> {
         self.refresh_rotations();
         let mut cost = 0.0;
         let mut behind = 0;
-        for p in 0..self.n_point_slots {
-            if self.points[p].flags & (PT_USED | PT_EXCLUDED) != PT_USED {
+        // Observation by observation, projections without Jacobians.
+        for i in 0..self.n_obs {
+            let o = self.obs[i];
+            let pt = &self.points[o.point as usize];
+            if !(o.factor > 0.0) || pt.flags & (PT_USED | PT_EXCLUDED) != PT_USED {
                 continue;
             }
-            let (_, c, bh) = self.point_blocks(p, false);
-            cost += c;
-            behind += bh;
+            let Some(slot) = self.slot_of(o.epoch) else {
+                continue;
+            };
+            let e = &self.epochs[slot];
+            let cam = if o.camera == 0 {
+                Camera::Left
+            } else {
+                Camera::Right
+            };
+            let c = [e.params[3], e.params[4], e.params[5]];
+            let f = self.focal[o.camera as usize];
+            match project_xy(
+                &Rotations(e.rot),
+                &c,
+                &self.rig_rot,
+                &self.rig.base,
+                cam,
+                f,
+                &pt.xyz,
+            ) {
+                Some(xy) => {
+                    let r = [o.xy[0] - xy[0], o.xy[1] - xy[1]];
+                    cost += o.factor * (o.weight[0] * r[0] * r[0] + o.weight[1] * r[1] * r[1]);
+                    self.obs[i].flags &= !Observation::BEHIND;
+                }
+                None => {
+                    self.obs[i].flags |= Observation::BEHIND;
+                    behind += 1;
+                }
+            }
+        }
+        for pt in &self.points[..self.n_point_slots] {
+            if pt.flags & (PT_USED | PT_EXCLUDED | PT_PRIOR) == PT_USED | PT_PRIOR {
+                let wp = 1.0 / (pt.prior_sigma * pt.prior_sigma);
+                for a in 0..3 {
+                    let r = pt.prior[a] - pt.xyz[a];
+                    cost += wp * r * r;
+                }
+            }
         }
         (cost + self.add_constraints(false).0, behind)
     }
