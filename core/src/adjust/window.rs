@@ -71,7 +71,8 @@ pub enum Robust {
     /// `T = v^T Q_vv^-1 v` against `critical` (chi-square, 2 dof) until stable.
     Snooping { critical: f64 },
     /// Seed 000: after one adjustment, observations whose x residual exceeds
-    /// `threshold_mm` (the pixel size) get weight 1e-5 and the adjustment reruns once.
+    /// `threshold_mm` (the pixel size) get weight 1e-5 (both coordinates; the
+    /// new weight stays in the window) and the adjustment reruns once.
     SeedReweight { threshold_mm: f64 },
 }
 
