@@ -2,3 +2,4 @@
 //! emulated rig link and the CLI's commands.
 pub mod block;
 pub mod commands;
+pub mod report;
