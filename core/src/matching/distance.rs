@@ -78,6 +78,6 @@ mod tests {
         assert!(!passes_ratio(0, 0, 0.8));
         assert!(passes_ratio(5, u32::MAX, 0.8));
         assert!(passes_ratio(63, 100, 0.8));
-        assert!(!passes_ratio(64, 100, 0.8));
+        assert!(!passes_ratio(65, 100, 0.8));
     }
 }

@@ -131,6 +131,8 @@ struct StereoSide<'a> {
     track: &'a mut [u32],
     n_left: usize,
     n_right: usize,
+    /// Fingerprint of the keypoints these results belong to.
+    fingerprint: u64,
 }
 
 impl<'a> StereoSide<'a> {
@@ -142,6 +144,7 @@ impl<'a> StereoSide<'a> {
             track: carve(arena, n)?,
             n_left: 0,
             n_right: 0,
+            fingerprint: 0,
         };
         s.right_of.fill(NONE);
         s.track.fill(NONE);
@@ -170,6 +173,8 @@ pub struct Matcher<'a> {
     /// Epoch counter (incremented by each accepted epoch).
     epoch: u32,
     has_prev: bool,
+    /// The last stereo result is in `cur` (a standalone or rejected epoch), else in `prev`.
+    stereo_in_cur: bool,
     n_tie: usize,
 }
 
@@ -198,6 +203,7 @@ impl<'a> Matcher<'a> {
             cfg,
             epoch: 0,
             has_prev: false,
+            stereo_in_cur: false,
             n_tie: 0,
         })
     }
@@ -239,9 +245,11 @@ impl<'a> Matcher<'a> {
         };
         stats.ignored_keypoints += self.grid.build(right.keypoints) as u32;
         let params = self.params();
+        self.stereo_in_cur = true;
         let cur = &mut self.cur;
         cur.n_left = nl;
         cur.n_right = nr;
+        cur.fingerprint = fingerprint(&pair, n);
         cur.track[..].fill(NONE);
         stats.pass = match self.cfg.stereo {
             StereoGeometry::Rectified {
@@ -336,7 +344,11 @@ impl<'a> Matcher<'a> {
         &'s self,
         left: &'s [crate::features::Keypoint],
     ) -> impl Iterator<Item = StereoMatch> + 's {
-        let cur = &self.cur;
+        let cur = if self.stereo_in_cur {
+            &self.cur
+        } else {
+            &self.prev
+        };
         (0..cur.n_left.min(left.len())).filter_map(move |i| {
             let j = cur.right_of[i];
             (j != NONE).then(|| StereoMatch {
@@ -432,10 +444,7 @@ impl<'a> Matcher<'a> {
         }
         let n = self.cfg.max_keypoints;
         if let Some(p) = prev {
-            if !self.has_prev
-                || p.left.usable(n) != self.prev.n_left
-                || p.right.usable(n) != self.prev.n_right
-            {
+            if !self.has_prev || fingerprint(&p, n) != self.prev.fingerprint {
                 return Err(MatchError::PreviousMismatch);
             }
         }
@@ -593,6 +602,7 @@ impl<'a> Matcher<'a> {
             self.epoch = self.epoch.wrapping_add(1);
         }
         self.has_prev = true;
+        self.stereo_in_cur = false;
         core::mem::swap(&mut self.prev, &mut self.cur);
     }
 
@@ -615,4 +625,23 @@ impl<'a> Matcher<'a> {
     pub fn quads(&self) -> &[Quad] {
         &self.quads[..self.n_tie]
     }
+}
+
+/// FNV-1a over the keypoint positions and counts: detects a `prev` argument that is not
+/// the epoch the stored stereo results belong to, in O(n) without keeping a copy.
+fn fingerprint(pair: &StereoFeatures<'_>, cap: usize) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    let mut eat = |v: u32| {
+        h ^= v as u64;
+        h = h.wrapping_mul(0x100_0000_01b3);
+    };
+    for f in [pair.left, pair.right] {
+        let n = f.usable(cap);
+        eat(n as u32);
+        for k in &f.keypoints[..n] {
+            eat(k.x.to_bits());
+            eat(k.y.to_bits());
+        }
+    }
+    h
 }

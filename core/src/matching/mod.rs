@@ -16,6 +16,7 @@ pub mod refine;
 pub mod search;
 pub mod spread;
 pub mod stereo;
+pub mod synthetic;
 pub mod temporal;
 pub mod tracks;
 
