@@ -48,6 +48,10 @@ pub struct RefineConfig {
     /// Search along the row only and put the right point on the left point's row
     /// (rectified pairs, where the row is known exactly).
     pub rows_only: bool,
+    /// Left-right check: the right template, correlated back into the left image, must
+    /// land within this many pixels of the left point (0 disables the check). Rejects
+    /// matches whose templates straddle an occlusion edge.
+    pub back_check_px: f32,
 }
 
 impl Default for RefineConfig {
@@ -57,6 +61,7 @@ impl Default for RefineConfig {
             search_radius: 2,
             min_ncc: 0.8,
             rows_only: true,
+            back_check_px: 0.5,
         }
     }
 }
@@ -166,6 +171,7 @@ impl MatchConfig {
                     && (r.search_radius as usize) <= MAX_REFINE_RADIUS
                     && r.search_radius > 0
                     && r.min_ncc.is_finite()
+                    && r.back_check_px.is_finite()
             }
         };
         if !finite || !geometry_ok || !refine_ok || self.ratio > 1.0 {

@@ -11,7 +11,7 @@ use super::config::{carve, MatchConfig, MatchError, StereoGeometry, NONE};
 use super::grid::Grid;
 use super::predict::predict_positions;
 use super::quad::{close_loops, LoopDistances, Quad, QuadStats};
-use super::refine::{refine_match, RefineError};
+use super::refine::{refine_checked, RefineError};
 use super::search::{match_pass, Best, Features, PairStats, PassParams};
 use super::spread::spread;
 use super::stereo::{RectifiedBand, RigBand};
@@ -313,7 +313,7 @@ impl<'a> Matcher<'a> {
             let (Some(rc), Some((li, ri))) = (self.cfg.refine, images) else {
                 continue;
             };
-            match refine_match(&li, &ri, [kl.x, kl.y], [kr.x, kr.y], &rc) {
+            match refine_checked(&li, &ri, [kl.x, kl.y], [kr.x, kr.y], &rc) {
                 Ok((p, _)) => {
                     cur.right_px[i] = p;
                     stats.refined += 1;
