@@ -5,6 +5,7 @@
 //! Features come from COLMAP text feature files (`--left-features`, `--right-features`,
 //! the format `phototraverse features` writes) or, without them, from the core extractor.
 
+use super::features::extract_with;
 use crate::dataset::{load_gray, read_rig, GrayImage};
 use anyhow::{bail, Context};
 use phototraverse_core::budget::Arena;
@@ -14,6 +15,7 @@ use phototraverse_core::matching::{
     Features, MatchConfig, Matcher, RefineConfig, StereoFeatures, StereoGeometry, StereoMatch,
     StereoStats,
 };
+use phototraverse_core::sift::SiftConfig;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -49,11 +51,25 @@ pub struct Args {
     pub min_depth: f64,
     #[arg(long)]
     pub max_depth: Option<f64>,
+    /// Largest squared descriptor distance of a match (u8 descriptors).
+    #[arg(long, default_value_t = 120_000)]
+    pub max_distance: u32,
+    /// Contrast threshold of the extractor (when no feature files are given). The
+    /// extractor defaults here are for dense stereo tie points: low contrast, five
+    /// levels per octave, a lenient edge test.
+    #[arg(long, default_value_t = 0.005)]
+    pub contrast: f32,
+    /// Detection levels per octave of the extractor.
+    #[arg(long, default_value_t = 5)]
+    pub levels: usize,
+    /// Edge threshold of the extractor.
+    #[arg(long, default_value_t = 20.0)]
+    pub edge: f32,
     /// Lowe's ratio.
     #[arg(long, default_value_t = 0.8)]
     pub ratio: f32,
-    /// Keypoints used per image (the strongest first).
-    #[arg(long, default_value_t = 8000)]
+    /// Keypoints per image (extracted, or the strongest of the feature files).
+    #[arg(long, default_value_t = 4000)]
     pub max_keypoints: usize,
     /// COLMAP text features of the left image (instead of extracting).
     #[arg(long, requires = "right_features")]
@@ -153,15 +169,37 @@ pub fn parse_colmap_features(text: &str) -> anyhow::Result<ImageFeatures> {
     Ok(out)
 }
 
-/// Features of an image: from a file when given, else from the core extractor.
-fn features_of(file: Option<&Path>, _image: &GrayImage) -> anyhow::Result<ImageFeatures> {
-    match file {
-        Some(f) => read_colmap_features(f),
-        None => bail!(
-            "the core feature extractor is not available in this build yet: \
-             pass --left-features and --right-features (COLMAP text format)"
-        ),
+/// Features of an image: from a file when given, else from the core extractor
+/// (reduced SIFT with its default settings and `max_keypoints`).
+fn features_of(
+    file: Option<&Path>,
+    image: &GrayImage,
+    args: &Args,
+) -> anyhow::Result<ImageFeatures> {
+    if let Some(f) = file {
+        return read_colmap_features(f);
     }
+    let (w, h) = (image.width as usize, image.height as usize);
+    let cfg = SiftConfig {
+        max_width: w,
+        max_height: h,
+        max_keypoints: args.max_keypoints,
+        contrast_threshold: args.contrast,
+        levels: args.levels,
+        edge_threshold: args.edge,
+        pending_capacity: 2 * args.max_keypoints.max(1024),
+        ..SiftConfig::default()
+    };
+    let mut out = ImageFeatures {
+        keypoints: Vec::new(),
+        descriptors: Vec::new(),
+    };
+    extract_with(cfg, &image.data, w, h, 1, |set| {
+        out.keypoints = set.keypoints().to_vec();
+        out.descriptors = set.descriptors().to_vec();
+        Ok(())
+    })?;
+    Ok(out)
 }
 
 /// The matcher configuration the arguments describe.
@@ -198,6 +236,7 @@ pub fn config_from_args(
     let cfg = MatchConfig {
         stereo,
         ratio: args.ratio,
+        max_distance: args.max_distance,
         refine,
         // Dense real images: a wide disparity band holds many candidates.
         max_candidates: 256,
@@ -291,13 +330,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             right_img.height
         );
     }
+    let k = args.max_keypoints;
     let left = strongest(
-        features_of(args.left_features.as_deref(), &left_img)?,
-        args.max_keypoints,
+        features_of(args.left_features.as_deref(), &left_img, &args)?,
+        k,
     );
     let right = strongest(
-        features_of(args.right_features.as_deref(), &right_img)?,
-        args.max_keypoints,
+        features_of(args.right_features.as_deref(), &right_img, &args)?,
+        k,
     );
     let n = left.keypoints.len().max(right.keypoints.len());
     let cfg = config_from_args(&args, left_img.width, left_img.height, n)?;
