@@ -362,3 +362,76 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn colmap_features_round_trip_the_pixel_convention() {
+        let mut text = String::from("2 128\n");
+        for (x, y) in [(10.5, 20.5), (0.25, 479.75)] {
+            text += &format!("{x} {y} 1.6 0.5");
+            for i in 0..128 {
+                text += &format!(" {}", i * 2);
+            }
+            text += "\n";
+        }
+        let f = parse_colmap_features(&text).unwrap();
+        assert_eq!(f.keypoints.len(), 2);
+        assert_eq!((f.keypoints[0].x, f.keypoints[0].y), (10.0, 20.0));
+        assert_eq!((f.keypoints[1].x, f.keypoints[1].y), (-0.25, 479.25));
+        assert_eq!(f.descriptors[0][127], 254);
+        let line = format_matches(&[StereoMatch {
+            left: 0,
+            right: 0,
+            left_px: [10.0, 20.0],
+            right_px: [3.25, 20.0],
+            distance: 0,
+        }]);
+        assert_eq!(line, "10.500 20.500 3.750 20.500\n");
+    }
+
+    #[test]
+    fn colmap_features_reject_malformed_files() {
+        for bad in [
+            "",
+            "x 128\n",
+            "1 64\n",
+            "2 128\n1 2 3 4",
+            "1 128\n1 2 3 4 5\n",
+            "0 128\n1 2 3 4\n",
+        ] {
+            assert!(parse_colmap_features(bad).is_err(), "{bad:?}");
+        }
+        let mut nan = String::from("1 128\nNaN 1 1 0");
+        nan += &" 0".repeat(128);
+        assert!(parse_colmap_features(&nan).is_err());
+    }
+
+    proptest! {
+        #[test]
+        fn colmap_parser_never_panics(s in "\\PC{0,400}") {
+            let _ = parse_colmap_features(&s);
+        }
+
+        #[test]
+        fn colmap_parser_reads_what_it_is_given(
+            pts in prop::collection::vec((0.0f32..1000.0, 0.0f32..1000.0, 0.5f32..30.0, any::<u8>()), 0..20)
+        ) {
+            let mut text = format!("{} 128\n", pts.len());
+            for (x, y, s, v) in &pts {
+                text += &format!("{x} {y} {s} 0");
+                text += &format!(" {v}").repeat(128);
+                text += "\n";
+            }
+            let f = parse_colmap_features(&text).unwrap();
+            prop_assert_eq!(f.keypoints.len(), pts.len());
+            for ((k, d), (x, y, _, v)) in f.keypoints.iter().zip(&f.descriptors).zip(&pts) {
+                prop_assert!((k.x - (x - 0.5)).abs() < 1e-3 && (k.y - (y - 0.5)).abs() < 1e-3);
+                prop_assert!(d.iter().all(|b| b == v));
+            }
+        }
+    }
+}
