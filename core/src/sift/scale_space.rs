@@ -68,15 +68,18 @@ pub fn blur_row(
     right.fill(input[w - 1]);
     let pad = &*pad;
     let acc = &mut acc[..w];
-    let k0 = taps[0];
+    // Taps and samples are i16 (taps <= 2^14, samples <= 255 * 64, so a pair sum fits), which
+    // lets the compiler use 16x16->32 bit multiplies.
+    let k0 = taps[0] as i16 as i32;
     for (a, &p) in acc.iter_mut().zip(&pad[radius..radius + w]) {
         *a = k0 * p as i32;
     }
-    for (j, &kj) in taps.iter().enumerate().take(radius + 1).skip(1) {
+    for j in 1..=radius {
+        let kj = taps[j] as i16 as i32;
         let lo = &pad[radius - j..radius - j + w];
         let hi = &pad[radius + j..radius + j + w];
         for ((a, &l), &h) in acc.iter_mut().zip(lo).zip(hi) {
-            *a += kj * (l as i32 + h as i32);
+            *a += kj * l.wrapping_add(h) as i32;
         }
     }
     for (o, &a) in out[..w].iter_mut().zip(acc.iter()) {
@@ -95,15 +98,16 @@ pub fn blur_column<'r>(
     let w = out.len().min(acc.len());
     let acc = &mut acc[..w];
     let centre = rows(radius);
-    let k0 = taps[0];
+    let k0 = taps[0] as i16 as i32;
     for (a, &p) in acc.iter_mut().zip(&centre[..w]) {
         *a = k0 * p as i32;
     }
-    for (j, &kj) in taps.iter().enumerate().take(radius + 1).skip(1) {
+    for (j, &t) in taps.iter().enumerate().take(radius + 1).skip(1) {
+        let kj = t as i16 as i32;
         let lo = &rows(radius - j)[..w];
         let hi = &rows(radius + j)[..w];
         for ((a, &l), &h) in acc.iter_mut().zip(lo).zip(hi) {
-            *a += kj * (l as i32 + h as i32);
+            *a += kj * l.wrapping_add(h) as i32;
         }
     }
     for (o, &a) in out[..w].iter_mut().zip(acc.iter()) {
@@ -121,22 +125,23 @@ pub fn blur_column_u8<'r>(
 ) {
     let w = out.len().min(acc.len());
     let acc = &mut acc[..w];
-    let shift = super::config::FRAC_BITS;
     let centre = rows(radius);
-    let k0 = taps[0] << shift;
+    let k0 = taps[0] as i16 as i32;
     for (a, &p) in acc.iter_mut().zip(&centre[..w]) {
-        *a = k0 * p as i32;
+        *a = k0 * p as i16 as i32;
     }
     for (j, &t) in taps.iter().enumerate().take(radius + 1).skip(1) {
-        let kj = t << shift;
+        let kj = t as i16 as i32;
         let lo = &rows(radius - j)[..w];
         let hi = &rows(radius + j)[..w];
         for ((a, &l), &h) in acc.iter_mut().zip(lo).zip(hi) {
-            *a += kj * (l as i32 + h as i32);
+            *a += kj * (l as i16 + h as i16) as i32;
         }
     }
+    // Q14 taps times 2^6 fractional bits: shift by 14 - 6.
+    let shift = KERNEL_BITS - super::config::FRAC_BITS;
     for (o, &a) in out[..w].iter_mut().zip(acc.iter()) {
-        *o = round_q14(a);
+        *o = ((a + (1 << (shift - 1))) >> shift) as i16;
     }
 }
 
