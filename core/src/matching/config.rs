@@ -101,6 +101,8 @@ pub struct MatchConfig {
     pub track_history: usize,
     /// Optional sub-pixel refinement of stereo matches (needs the images).
     pub refine: Option<RefineConfig>,
+    /// Rigid-motion consistency of the quads (needs the rig at each epoch).
+    pub motion_check: Option<super::motion::MotionCheckConfig>,
 }
 
 impl MatchConfig {
@@ -128,6 +130,7 @@ impl MatchConfig {
             max_tracks: max_keypoints,
             track_history: 8,
             refine: None,
+            motion_check: Some(super::motion::MotionCheckConfig::default()),
         }
     }
 
@@ -208,6 +211,13 @@ impl MatchConfig {
         budget.add("match.corrected", w, slice_bytes::<[f32; 2]>(n));
         budget.add("match.temporal", w, 4 * slice_bytes::<u32>(n));
         budget.add("match.predictions", w, 2 * slice_bytes::<[f32; 2]>(n));
+        budget.add(
+            "match.motion",
+            w,
+            slice_bytes::<super::motion::QuadObs>(n)
+                + slice_bytes::<[f64; 3]>(2 * n)
+                + slice_bytes::<u8>(n),
+        );
         budget.add(
             "match.quads",
             w,
