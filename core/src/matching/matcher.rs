@@ -645,6 +645,7 @@ impl<'a> Matcher<'a> {
                 self.cur.right_px[a],
             ];
         }
+        super::motion::to_corrected(rig, &mut self.quad_obs[..nq]);
         let seed = self.epoch;
         if check_motion(
             rig,

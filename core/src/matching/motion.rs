@@ -8,7 +8,6 @@
 //! images within `threshold_px` of its observations. Image-space residuals keep far
 //! points, whose depth is poor but whose reprojection is still exact, in the test.
 
-use super::predict::triangulate;
 use crate::camera::Rig;
 use nalgebra::{Matrix3, Vector3};
 
@@ -70,21 +69,19 @@ fn kabsch(p: &[Vector3<f64>], q: &[Vector3<f64>], w: &[f64]) -> Option<Motion> {
     (r.iter().chain(t.iter()).all(|x| x.is_finite())).then_some(Motion { r, t })
 }
 
-/// Reprojection residual (pixels, the larger of left and right) of `p` moved by `m`.
+/// Reprojection residual (mm in corrected photo-coordinates, the larger of left and
+/// right) of `p` moved by `m`; `obs` holds corrected coordinates. Working in corrected
+/// coordinates avoids the iterative inverse distortion in the RANSAC loop.
 fn residual(rig: &Rig, mrel: &Matrix3<f64>, m: &Motion, p: &Vector3<f64>, obs: &QuadObs) -> f64 {
     let q = m.r * p + m.t;
-    let px = |cam: &crate::camera::Interior, x: Vector3<f64>| -> Option<[f64; 2]> {
+    let proj = |f: f64, x: Vector3<f64>| -> Option<[f64; 2]> {
         if x[2].is_nan() || x[2] >= -1e-9 {
             return None;
         }
-        let f = cam.focal_mm;
-        cam.corrected_to_pixel(-f * x[0] / x[2], -f * x[1] / x[2])
-            .ok()
+        Some([-f * x[0] / x[2], -f * x[1] / x[2]])
     };
-    let (Some(l), Some(r)) = (
-        px(&rig.left, q),
-        px(&rig.right, mrel * (q - Vector3::from(rig.base_m))),
-    ) else {
+    let right = mrel * (q - Vector3::from(rig.base_m));
+    let (Some(l), Some(r)) = (proj(rig.left.focal_mm, q), proj(rig.right.focal_mm, right)) else {
         return f64::INFINITY;
     };
     let el = libm::hypot(l[0] - obs[2][0] as f64, l[1] - obs[2][1] as f64);
@@ -92,8 +89,43 @@ fn residual(rig: &Rig, mrel: &Matrix3<f64>, m: &Motion, p: &Vector3<f64>, obs: &
     el.max(er)
 }
 
+/// Midpoint triangulation from corrected coordinates (left camera frame).
+fn triangulate_corrected(
+    rig: &Rig,
+    mrel: &Matrix3<f64>,
+    l: [f32; 2],
+    r: [f32; 2],
+) -> Option<Vector3<f64>> {
+    let dl = Vector3::new(l[0] as f64, l[1] as f64, -rig.left.focal_mm);
+    let dr = mrel.transpose() * Vector3::new(r[0] as f64, r[1] as f64, -rig.right.focal_mm);
+    let b = Vector3::from(rig.base_m);
+    let (a11, a12, a22) = (dl.dot(&dl), -dl.dot(&dr), dr.dot(&dr));
+    let (r1, r2) = (dl.dot(&b), -dr.dot(&b));
+    let det = a11 * a22 - a12 * a12;
+    if det.is_nan() || det.abs() <= 1e-12 * a11 * a22 {
+        return None;
+    }
+    let s = (r1 * a22 - a12 * r2) / det;
+    let u = (a11 * r2 - a12 * r1) / det;
+    if s.is_nan() || u.is_nan() || s <= 0.0 || u <= 0.0 {
+        return None;
+    }
+    Some((dl * s + b + dr * u) * 0.5)
+}
+
+/// Converts pixel observations to corrected photo-coordinates (mm), in place.
+pub fn to_corrected(rig: &Rig, obs: &mut [QuadObs]) {
+    for o in obs.iter_mut() {
+        for (k, p) in o.iter_mut().enumerate() {
+            let cam = if k % 2 == 0 { &rig.left } else { &rig.right };
+            let [x, y] = cam.pixel_to_corrected(p[0] as f64, p[1] as f64);
+            *p = [x as f32, y as f32];
+        }
+    }
+}
+
 /// Marks the quads consistent with one rigid motion. `obs[i]` are quad `i`'s four
-/// observations; `pts` is scratch for the triangulations (at least `2 * obs.len()`);
+/// observations in corrected photo-coordinates (see [`to_corrected`]); `pts` is scratch for the triangulations (at least `2 * obs.len()`);
 /// `inlier[i]` receives the verdict. Returns the motion, or `None` when the check could
 /// not run (too few usable quads): then every quad is kept.
 pub fn check_motion(
@@ -111,9 +143,7 @@ pub fn check_motion(
     let mut usable = 0;
     for i in 0..n {
         let o = &obs[i];
-        let tri = |l: [f32; 2], r: [f32; 2]| {
-            triangulate(rig, [l[0] as f64, l[1] as f64], [r[0] as f64, r[1] as f64])
-        };
+        let tri = |l: [f32; 2], r: [f32; 2]| triangulate_corrected(rig, &mrel, l, r);
         match (tri(o[0], o[1]), tri(o[2], o[3])) {
             (Some(p), Some(q)) => {
                 pts[2 * i] = [p[0], p[1], p[2]];
@@ -132,7 +162,9 @@ pub fn check_motion(
     }
     let v = |i: usize, k: usize| Vector3::from(pts[2 * i + k]);
     let weight = |p: &Vector3<f64>| 1.0 / (p[2] * p[2]).max(1e-6);
-    let thr = cfg.threshold_px as f64;
+    // The threshold in mm on the image plane.
+    let px = 0.5 * (rig.left.pixel_size_mm[0] + rig.left.pixel_size_mm[1]);
+    let thr = cfg.threshold_px as f64 * px;
     let count = |m: &Motion| {
         (0..n)
             .filter(|&i| {
@@ -148,7 +180,12 @@ pub fn check_motion(
         (rng >> 33) as usize % n
     };
     let mut best: Option<(usize, Motion)> = None;
-    for _ in 0..cfg.iterations {
+    // Adaptive RANSAC: stop once a sample of three inliers has been drawn with 99.9 %
+    // probability given the best inlier share so far (at most `iterations` samples).
+    let mut needed = cfg.iterations as f64;
+    let mut it = 0u32;
+    while (it as f64) < needed.min(cfg.iterations as f64) {
+        it += 1;
         let (a, b, c) = (next(), next(), next());
         if a == b || b == c || a == c || [a, b, c].iter().any(|&i| !pts[2 * i][0].is_finite()) {
             continue;
@@ -166,6 +203,13 @@ pub fn check_motion(
         };
         if better {
             best = Some((k, m));
+            let w = k as f64 / usable as f64;
+            let miss = 1.0 - w * w * w;
+            needed = if miss <= 1e-9 {
+                0.0
+            } else {
+                libm::log(1e-3) / libm::log(miss)
+            };
         }
     }
     let (_, mut m) = best?;

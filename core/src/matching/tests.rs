@@ -434,10 +434,8 @@ fn tracks_capacity_keeps_spread_and_counts_dropped() {
     let first = reports[0];
     assert_eq!(first.tracks.started, 60);
     assert_eq!(first.tie_points, 60);
-    assert_eq!(
-        first.tracks.dropped as usize,
-        first.quads.closed as usize - 60
-    );
+    let kept = first.quads.closed - first.quads.motion_outliers;
+    assert_eq!(first.tracks.dropped, kept - 60);
     assert!(reports.iter().all(|r| r.tracks.live <= 60));
     // Later epochs continue the old tracks first.
     assert!(reports[1].tracks.continued > 40, "{:?}", reports[1].tracks);
@@ -470,7 +468,10 @@ fn spreading_covers_every_region() {
         )
         .unwrap();
     assert_eq!(rep.tie_points, 48);
-    assert_eq!(rep.spread_dropped, rep.quads.closed - 48);
+    assert_eq!(
+        rep.spread_dropped,
+        rep.quads.closed - rep.quads.motion_outliers - 48
+    );
     let mut per_region = [0u32; 12];
     for t in m.tie_points() {
         per_region[spread::region_of(t.cur.left[0], t.cur.left[1], 640, 480, 4, 3) as usize] += 1;
@@ -731,6 +732,7 @@ fn motion_check_removes_consistent_wrong_loops() {
             wrong += 1;
         }
     }
+    motion::to_corrected(&rig, &mut obs);
     let mut pts = vec![[0.0f64; 3]; 2 * n];
     let mut inlier = vec![0u8; n];
     let cfg = motion::MotionCheckConfig::default();
@@ -745,6 +747,10 @@ fn motion_check_removes_consistent_wrong_loops() {
     assert!((m.t - t_true).norm() < 0.05, "{} vs {}", m.t, t_true);
     // Too few quads: no verdict, everything kept.
     let mut few = vec![0u8; 5];
+    let cfg = motion::MotionCheckConfig {
+        min_quads: 8,
+        ..cfg
+    };
     assert!(motion::check_motion(&rig, &cfg, &obs[..5], &mut pts, &mut few, 1).is_none());
     assert!(few.iter().all(|&f| f == 1));
 }
