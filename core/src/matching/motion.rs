@@ -212,13 +212,22 @@ pub fn check_motion(
             };
         }
     }
-    let (_, mut m) = best?;
+    let (mut best_k, mut m) = best?;
     // Refit on the inliers (twice: the inlier set settles), accumulating the weighted
     // sums directly so no buffer is needed.
+    // A refit is kept only when it explains at least as many quads.
     for _ in 0..2 {
         if let Some(refit) = refit_inliers(rig, &mrel, &m, obs, pts, n, thr) {
-            m = refit;
+            let k = count(&refit);
+            if k >= best_k {
+                (best_k, m) = (k, refit);
+            }
         }
+    }
+    if best_k < cfg.min_quads {
+        // No motion explains enough quads: no verdict rather than rejecting them all.
+        inlier[..n].fill(1);
+        return None;
     }
     for i in 0..n {
         inlier[i] =
