@@ -122,18 +122,18 @@ def run_opencv(img, repeat):
         t = time.perf_counter()
         kps, desc = sift.detectAndCompute(img, None)
         best = min(best, time.perf_counter() - t)
-    pts = np.array([k.pt for k in kps], float).reshape(-1, 2) - 0.5  # OpenCV: pixel centres at integers
+    pts = np.array([k.pt for k in kps], float).reshape(-1, 2)  # OpenCV: pixel centres at integers
     # OpenCV's size is the diameter 2 sigma: the region radius used below is sigma.
     sig = np.array([k.size / 2 for k in kps], float)
     return dict(pts=pts, sigma=sig, desc=np.asarray(desc, np.float32).reshape(-1, 128), ms=best * 1e3)
 
 
-def run_ours(binary, img, repeat, cap, tmp):
+def run_ours(binary, img, repeat, cap, tmp, extra=()):
     src = os.path.join(tmp, "img.png")
     out = os.path.join(tmp, "feat.txt")
     cv2.imwrite(src, img)
     res = subprocess.run([binary, "features", src, "--out", out, "--json", "--repeat", str(repeat),
-                          "--max-keypoints", str(max(cap, 1))], check=True, capture_output=True, text=True)
+                          "--max-keypoints", str(max(cap, 1))] + list(extra), check=True, capture_output=True, text=True)
     info = json.loads(res.stdout.strip().splitlines()[-1])
     with open(out) as f:
         n = int(f.readline().split()[0])
@@ -300,7 +300,8 @@ def main():
     ap.add_argument("--bin", default=os.path.join(ROOT, "target", "release", "phototraverse"))
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--json", default=os.path.join(ROOT, "bench", "sift", "results.json"))
-    ap.add_argument("--quick", action="store_true", help="two base images only")
+    ap.add_argument("--quick", action="store_true", help="one base image, four warps, no stereo")
+    ap.add_argument("--ours-args", default="", help="extra arguments for `phototraverse features`")
     args = ap.parse_args()
     if not os.path.isdir(args.data):
         print(f"data directory {args.data} is missing: nothing to benchmark", file=sys.stderr)
@@ -311,15 +312,17 @@ def main():
     cv2.setNumThreads(1)
     pairs = []
     bases = base_images(args.data)
+    ws = warps()
     if args.quick:
-        bases = bases[:2]
+        bases = bases[:1]
+        ws = [ws[i] for i in (1, 3, 4, 7)]
     for bname, img in bases:
-        for i, (wname, hm, photo) in enumerate(warps()):
+        for i, (wname, hm, photo) in enumerate(ws):
             pairs.append((f"{bname}/{wname}", img, apply_warp(img, hm, photo, i), Homography(hm)))
     sd = os.path.join(args.data, "stereo")
     left = cv2.imread(os.path.join(sd, "motorcycle_left.png"), cv2.IMREAD_GRAYSCALE)
     right = cv2.imread(os.path.join(sd, "motorcycle_right.png"), cv2.IMREAD_GRAYSCALE)
-    if left is not None and right is not None and os.path.exists(os.path.join(sd, "motorcycle_disp.pfm")):
+    if not args.quick and left is not None and right is not None and os.path.exists(os.path.join(sd, "motorcycle_disp.pfm")):
         pairs.append(("motorcycle/stereo", left, right, Disparity(read_pfm(os.path.join(sd, "motorcycle_disp.pfm")))))
 
     rows = []
@@ -329,7 +332,7 @@ def main():
             key = img.tobytes().__hash__()
             if key not in cache:
                 cv = run_opencv(img, args.repeat)
-                ours = run_ours(args.bin, img, args.repeat, len(cv["pts"]), tmp)
+                ours = run_ours(args.bin, img, args.repeat, len(cv["pts"]), tmp, args.ours_args.split())
                 cache[key] = (cv, ours)
             return cache[key]
 
