@@ -269,7 +269,10 @@ def repeatability(geom, fa, fb, shape_b, scale=3.0):
         # Ellipse of A's circle mapped by the local affine J: x^T (J^-T J^-1 / r^2) x <= 1.
         jinv = np.linalg.inv(jac[i])
         ea = jinv.T @ jinv / (ra[i] ** 2)
-        cand = np.where((np.linalg.norm(pb - q[i], axis=1) < 2 * (rb + ra[i] * np.sqrt(abs(np.linalg.det(jac[i]))))) & ~used)[0]
+        # Overlap error < 0.4 needs radii within a factor 1/sqrt(0.6) and close centres.
+        ra_eq = ra[i] * np.sqrt(abs(np.linalg.det(jac[i])))
+        dist = np.linalg.norm(pb - q[i], axis=1)
+        cand = np.where((dist < 0.6 * np.maximum(rb, ra_eq)) & (rb > 0.77 * ra_eq) & (rb < 1.3 * ra_eq) & ~used)[0]
         best, bj = 0.4, -1
         for j in cand:
             e = overlap_error(q[i], ea, pb[j], rb[j])
@@ -301,6 +304,7 @@ def main():
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--json", default=os.path.join(ROOT, "bench", "sift", "results.json"))
     ap.add_argument("--quick", action="store_true", help="one base image, four warps, no stereo")
+    ap.add_argument("--bases", default="", help="comma-separated base image names (default: all)")
     ap.add_argument("--ours-args", default="", help="extra arguments for `phototraverse features`")
     args = ap.parse_args()
     if not os.path.isdir(args.data):
@@ -313,6 +317,9 @@ def main():
     pairs = []
     bases = base_images(args.data)
     ws = warps()
+    if args.bases:
+        keep = args.bases.split(",")
+        bases = [b for b in bases if b[0] in keep]
     if args.quick:
         bases = bases[:1]
         ws = [ws[i] for i in (1, 3, 4, 7)]
