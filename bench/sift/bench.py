@@ -122,18 +122,18 @@ def run_opencv(img, repeat):
         t = time.perf_counter()
         kps, desc = sift.detectAndCompute(img, None)
         best = min(best, time.perf_counter() - t)
-    pts = np.array([k.pt for k in kps], float).reshape(-1, 2) - 0.5  # OpenCV: pixel centres at integers
+    pts = np.array([k.pt for k in kps], float).reshape(-1, 2)  # OpenCV: pixel centres at integers
     # OpenCV's size is the diameter 2 sigma: the region radius used below is sigma.
     sig = np.array([k.size / 2 for k in kps], float)
     return dict(pts=pts, sigma=sig, desc=np.asarray(desc, np.float32).reshape(-1, 128), ms=best * 1e3)
 
 
-def run_ours(binary, img, repeat, cap, tmp):
+def run_ours(binary, img, repeat, cap, tmp, extra=()):
     src = os.path.join(tmp, "img.png")
     out = os.path.join(tmp, "feat.txt")
     cv2.imwrite(src, img)
     res = subprocess.run([binary, "features", src, "--out", out, "--json", "--repeat", str(repeat),
-                          "--max-keypoints", str(max(cap, 1))], check=True, capture_output=True, text=True)
+                          "--max-keypoints", str(max(cap, 1))] + list(extra), check=True, capture_output=True, text=True)
     info = json.loads(res.stdout.strip().splitlines()[-1])
     with open(out) as f:
         n = int(f.readline().split()[0])
@@ -144,18 +144,22 @@ def run_ours(binary, img, repeat, cap, tmp):
 
 
 def opencv_bytes_per_pixel(img):
-    """Peak RSS growth of OpenCV's SIFT in a fresh process, per pixel."""
+    """Peak RSS of OpenCV's SIFT on the image minus that on a 32x32 image, each in a fresh
+    process, per pixel (the import and the interpreter cancel out)."""
     code = ("import cv2,resource,sys,numpy as np;cv2.setNumThreads(1);"
-            "img=np.load(sys.argv[1]);s=cv2.SIFT_create();"
-            "a=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss;s.detectAndCompute(img,None);"
-            "b=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss;print((b-a)*1024/img.size)")
-    with tempfile.TemporaryDirectory() as d:
-        p = os.path.join(d, "i.npy")
-        np.save(p, img)
-        r = subprocess.run([sys.executable, "-c", code, p], capture_output=True, text=True)
+            "img=np.load(sys.argv[1]);s=cv2.SIFT_create();s.detectAndCompute(img,None);"
+            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
+
+    def peak(a):
+        with tempfile.TemporaryDirectory() as d:
+            p = os.path.join(d, "i.npy")
+            np.save(p, a)
+            r = subprocess.run([sys.executable, "-c", code, p], capture_output=True, text=True)
+        return float(r.stdout.strip()) * 1024
+
     try:
-        return float(r.stdout.strip())
-    except ValueError:
+        return (peak(img) - peak(np.ascontiguousarray(img[:32, :32]))) / img.size
+    except (ValueError, OSError):
         return float("nan")
 
 
@@ -269,7 +273,10 @@ def repeatability(geom, fa, fb, shape_b, scale=3.0):
         # Ellipse of A's circle mapped by the local affine J: x^T (J^-T J^-1 / r^2) x <= 1.
         jinv = np.linalg.inv(jac[i])
         ea = jinv.T @ jinv / (ra[i] ** 2)
-        cand = np.where((np.linalg.norm(pb - q[i], axis=1) < 2 * (rb + ra[i] * np.sqrt(abs(np.linalg.det(jac[i]))))) & ~used)[0]
+        # Overlap error < 0.4 needs radii within a factor 1/sqrt(0.6) and close centres.
+        ra_eq = ra[i] * np.sqrt(abs(np.linalg.det(jac[i])))
+        dist = np.linalg.norm(pb - q[i], axis=1)
+        cand = np.where((dist < 0.6 * np.maximum(rb, ra_eq)) & (rb > 0.77 * ra_eq) & (rb < 1.3 * ra_eq) & ~used)[0]
         best, bj = 0.4, -1
         for j in cand:
             e = overlap_error(q[i], ea, pb[j], rb[j])
@@ -300,7 +307,9 @@ def main():
     ap.add_argument("--bin", default=os.path.join(ROOT, "target", "release", "phototraverse"))
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--json", default=os.path.join(ROOT, "bench", "sift", "results.json"))
-    ap.add_argument("--quick", action="store_true", help="two base images only")
+    ap.add_argument("--quick", action="store_true", help="one base image, four warps, no stereo")
+    ap.add_argument("--bases", default="", help="comma-separated base image names (default: all)")
+    ap.add_argument("--ours-args", default="", help="extra arguments for `phototraverse features`")
     args = ap.parse_args()
     if not os.path.isdir(args.data):
         print(f"data directory {args.data} is missing: nothing to benchmark", file=sys.stderr)
@@ -311,15 +320,20 @@ def main():
     cv2.setNumThreads(1)
     pairs = []
     bases = base_images(args.data)
+    ws = warps()
+    if args.bases:
+        keep = args.bases.split(",")
+        bases = [b for b in bases if b[0] in keep]
     if args.quick:
-        bases = bases[:2]
+        bases = bases[:1]
+        ws = [ws[i] for i in (1, 3, 4, 7)]
     for bname, img in bases:
-        for i, (wname, hm, photo) in enumerate(warps()):
+        for i, (wname, hm, photo) in enumerate(ws):
             pairs.append((f"{bname}/{wname}", img, apply_warp(img, hm, photo, i), Homography(hm)))
     sd = os.path.join(args.data, "stereo")
     left = cv2.imread(os.path.join(sd, "motorcycle_left.png"), cv2.IMREAD_GRAYSCALE)
     right = cv2.imread(os.path.join(sd, "motorcycle_right.png"), cv2.IMREAD_GRAYSCALE)
-    if left is not None and right is not None and os.path.exists(os.path.join(sd, "motorcycle_disp.pfm")):
+    if not args.quick and left is not None and right is not None and os.path.exists(os.path.join(sd, "motorcycle_disp.pfm")):
         pairs.append(("motorcycle/stereo", left, right, Disparity(read_pfm(os.path.join(sd, "motorcycle_disp.pfm")))))
 
     rows = []
@@ -329,7 +343,7 @@ def main():
             key = img.tobytes().__hash__()
             if key not in cache:
                 cv = run_opencv(img, args.repeat)
-                ours = run_ours(args.bin, img, args.repeat, len(cv["pts"]), tmp)
+                ours = run_ours(args.bin, img, args.repeat, len(cv["pts"]), tmp, args.ours_args.split())
                 cache[key] = (cv, ours)
             return cache[key]
 

@@ -334,6 +334,32 @@ fn capacity_keeps_strong_keypoints_spread_over_the_grid() {
 }
 
 #[test]
+fn fine_octave_adds_small_scale_keypoints_deterministically() {
+    let img = texture(320, 240, 9);
+    let base = SiftConfig {
+        max_keypoints: 5000,
+        ..cfg(320, 240)
+    };
+    let fine = SiftConfig {
+        fine_octave: true,
+        ..base
+    };
+    let a = run(base, &img, 320, 240);
+    let b = run(fine, &img, 320, 240);
+    let c = run(fine, &img, 320, 240);
+    let (sa, sb) = (a.result.unwrap(), b.result.unwrap());
+    assert_eq!(sb.octaves, sa.octaves + 1);
+    assert!(b.keypoints.len() > a.keypoints.len());
+    // Octave 0 keeps refined layers >= 0.5 (sigma >= 1.6 * 2^(1/6) ~ 1.796); the fine octave reaches below.
+    let small = b.keypoints.iter().filter(|k| k.sigma < 1.79).count();
+    assert!(small > 0 && a.keypoints.iter().all(|k| k.sigma >= 1.79));
+    assert_eq!(b.descriptors, c.descriptors);
+    // Same buffers: the fine octave fits the regular rings.
+    assert_eq!(a.budget.total(), b.budget.total());
+    assert!(b.total_used <= b.budget.total());
+}
+
+#[test]
 fn upright_mode_has_zero_orientation() {
     let img = texture(200, 150, 2);
     let r = run(
@@ -420,6 +446,7 @@ proptest! {
     #[test]
     fn never_panics_on_any_size_or_content(
         w in 1usize..72, h in 1usize..56, seed in any::<u64>(), kind in 0u8..4, cap in 1usize..40,
+        fine in any::<bool>(), upright in any::<bool>(),
     ) {
         let px: Vec<u8> = match kind {
             0 => texture(w, h, seed),
@@ -430,7 +457,7 @@ proptest! {
             2 => vec![(seed % 256) as u8; w * h],
             _ => (0..w * h).map(|i| if (i + seed as usize) % 3 == 0 { 255 } else { 0 }).collect(),
         };
-        let c = SiftConfig { max_width: 64, max_height: 48, max_keypoints: cap, grid_cols: 3, grid_rows: 2, ..SiftConfig::default() };
+        let c = SiftConfig { max_width: 64, max_height: 48, max_keypoints: cap, grid_cols: 3, grid_rows: 2, fine_octave: fine, upright, ..SiftConfig::default() };
         let r = run(c, &px, w, h);
         if w > 64 || h > 48 {
             prop_assert!(matches!(r.result, Err(SiftError::Image(ImageError::TooLarge { .. }))), "image over capacity accepted");

@@ -82,7 +82,7 @@ impl Default for SiftConfig {
             upright: false,
             pending_capacity: 2048,
             peak_ratio: 0.8,
-            fine_octave: true,
+            fine_octave: false,
         }
     }
 }

@@ -75,16 +75,12 @@ pub fn describe(
             rows[i as usize]
         }
     };
-    // Spatial bins of the grid are the same for every keypoint: integer bin and fraction.
-    let mut b0 = [0usize; DESC_GRID];
-    let mut bf = [0f32; DESC_GRID];
+    let inv_hw = 1.0 / hw;
+    let half = D as f32 * 0.5 - 0.5;
     let mut ucos = [0f32; DESC_GRID];
     let mut usin = [0f32; DESC_GRID];
     for j in 0..DESC_GRID {
         let b = grid_bin(j);
-        let f = floor_i(b);
-        b0[j] = (f + 1) as usize; // padded: bin -1 is index 0
-        bf[j] = b - f as f32;
         let u = (b - D as f32 * 0.5 + 0.5) * hw;
         ucos[j] = u * cos_t;
         usin[j] = u * sin_t;
@@ -96,7 +92,6 @@ pub fn describe(
     for i in 0..DESC_GRID {
         // The grid is square: row i has v = u_i, so v sin = usin[i] and v cos = ucos[i].
         let (vsin, vcos) = (usin[i], ucos[i]);
-        let (r0, fr) = (b0[i], bf[i]);
         for j in 0..DESC_GRID {
             // Keypoint frame (u along the orientation) to image offsets (y down).
             let sx = x + ucos[j] - vsin;
@@ -109,6 +104,14 @@ pub fn describe(
             let (up, row, down) = (row_at(pr - 1), row_at(pr), row_at(pr + 1));
             let c = pc as usize;
             if c + 1 >= row.len() || c >= up.len() || c >= down.len() {
+                continue;
+            }
+            // Bins from the exact position of the pixel sampled (not the ideal grid point), so
+            // rounding to the pixel grid does not blur the spatial binning under rotation.
+            let (ox, oy) = (pc as f32 - x, pr as f32 - y);
+            let cbin = (ox * cos_t + oy * sin_t) * inv_hw + half;
+            let rbin = (oy * cos_t - ox * sin_t) * inv_hw + half;
+            if cbin <= -1.0 || cbin >= D as f32 || rbin <= -1.0 || rbin >= D as f32 {
                 continue;
             }
             let dx = (row[c + 1] as i32 - row[c - 1] as i32) as f32;
@@ -125,7 +128,10 @@ pub fn describe(
             let obin = ori * obin_scale;
             let o0 = floor_i(obin).clamp(0, N as i32 - 1) as usize;
             let fo = obin - o0 as f32;
-            let (c0, fc) = (b0[j], bf[j]);
+            let (rf, cf) = (floor_i(rbin), floor_i(cbin));
+            let (fr, fc) = (rbin - rf as f32, cbin - cf as f32);
+            // Padded indices: bin -1 is index 0.
+            let (r0, c0) = ((rf + 1).max(0) as usize, (cf + 1).max(0) as usize);
             let m_r = [mag * (1.0 - fr), mag * fr];
             let w_c = [1.0 - fc, fc];
             for (dr, &mr) in m_r.iter().enumerate() {

@@ -438,12 +438,23 @@ impl<'a> Sift<'a> {
             let mut start = c0;
             while start < c1 {
                 let end = (start + 32).min(c1);
+                // Candidates: beyond the threshold and not below their row neighbours, as a
+                // bit mask built without branches (vectorises), then visited bit by bit.
                 let chunk = &cur[start..end];
-                let hi = chunk.iter().fold(i16::MIN, |m, &v| m.max(v));
-                let lo = chunk.iter().fold(i16::MAX, |m, &v| m.min(v));
-                if hi > thr16 || lo < -thr16 {
-                    for (i, &v) in chunk.iter().enumerate() {
-                        let c = start + i;
+                let left = &cur[start - 1..end - 1];
+                let right = &cur[start + 1..end + 1];
+                let mut mask = 0u32;
+                for (i, ((&v, &a), &b)) in chunk.iter().zip(left).zip(right).enumerate() {
+                    let max = (v > thr16) & (v >= a) & (v >= b);
+                    let min = (v < -thr16) & (v <= a) & (v <= b);
+                    mask |= ((max | min) as u32) << i;
+                }
+                while mask != 0 {
+                    let i = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    let c = start + i;
+                    let v = cur[c];
+                    {
                         if (v as i32).abs() <= thr || !is_extremum(&rows, c, v) {
                             continue;
                         }

@@ -38,8 +38,8 @@ pub fn orientations(
     let scale = ORI_BINS as f32 / (2.0 * PI);
     let r = radius as isize;
     // Large windows are sampled every other pixel: the level is blurred by sigma, so a
-    // 2-pixel step above sigma 2.5 loses little and quarters the cost.
-    let step = if sigma >= 2.5 { 2 } else { 1 };
+    // 2-pixel step above sigma 3 loses little and quarters the cost.
+    let step = if sigma >= 3.0 { 2 } else { 1 };
     for i in (-r..=r).step_by(step) {
         let yy = py + i;
         if yy <= 0 || yy >= h - 1 {
