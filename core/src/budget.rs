@@ -26,7 +26,11 @@ pub struct OutOfMemory {
 
 impl core::fmt::Display for OutOfMemory {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        write!(f, "arena exhausted: {} bytes requested, {} free", self.requested, self.available)
+        write!(
+            f,
+            "arena exhausted: {} bytes requested, {} free",
+            self.requested, self.available
+        )
     }
 }
 
@@ -40,17 +44,25 @@ pub struct Arena<'a> {
 impl<'a> Arena<'a> {
     pub fn new(storage: &'a mut [u8]) -> Self {
         let capacity = storage.len();
-        Arena { free: storage, capacity }
+        Arena {
+            free: storage,
+            capacity,
+        }
     }
 
     /// A zeroed slice of `n` values of `T`, aligned for `T`.
     pub fn alloc_slice<T: Pod>(&mut self, n: usize) -> Result<&'a mut [T], OutOfMemory> {
         let pad = self.free.as_ptr().align_offset(align_of::<T>());
-        let bytes = n.checked_mul(size_of::<T>()).and_then(|b| b.checked_add(pad));
+        let bytes = n
+            .checked_mul(size_of::<T>())
+            .and_then(|b| b.checked_add(pad));
         let available = self.free.len();
         let requested = bytes.unwrap_or(usize::MAX);
         if pad == usize::MAX || requested > available {
-            return Err(OutOfMemory { requested, available });
+            return Err(OutOfMemory {
+                requested,
+                available,
+            });
         }
         let free = core::mem::take(&mut self.free);
         let (head, tail) = free.split_at_mut(requested);
@@ -58,7 +70,10 @@ impl<'a> Arena<'a> {
         let body = &mut head[pad..];
         body.fill(0);
         // Alignment and length were established above, so the cast cannot fail.
-        bytemuck::try_cast_slice_mut(body).map_err(|_| OutOfMemory { requested, available })
+        bytemuck::try_cast_slice_mut(body).map_err(|_| OutOfMemory {
+            requested,
+            available,
+        })
     }
 
     /// Bytes carved so far (padding included): the measured working memory.
@@ -116,7 +131,11 @@ impl MemoryBudget {
 
     /// Adds a component; beyond [`MAX_COMPONENTS`] lines its bytes are summed under overflow.
     pub fn add(&mut self, name: &'static str, kind: ComponentKind, bytes: usize) {
-        if self.components.push(Component { name, bytes, kind }).is_err() {
+        if self
+            .components
+            .push(Component { name, bytes, kind })
+            .is_err()
+        {
             self.overflow_bytes += bytes;
         }
     }
@@ -132,12 +151,20 @@ impl MemoryBudget {
 
     /// Total predicted bytes of one kind.
     pub fn total_of(&self, kind: ComponentKind) -> usize {
-        self.components.iter().filter(|c| c.kind == kind).map(|c| c.bytes).sum()
+        self.components
+            .iter()
+            .filter(|c| c.kind == kind)
+            .map(|c| c.bytes)
+            .sum()
     }
 
     /// Total predicted bytes of the components whose name starts with `prefix`.
     pub fn total_with_prefix(&self, prefix: &str) -> usize {
-        self.components.iter().filter(|c| c.name.starts_with(prefix)).map(|c| c.bytes).sum()
+        self.components
+            .iter()
+            .filter(|c| c.name.starts_with(prefix))
+            .map(|c| c.bytes)
+            .sum()
     }
 }
 
@@ -164,7 +191,10 @@ mod tests {
         let mut arena = Arena::new(&mut storage);
         let err = arena.alloc_slice::<u64>(100).unwrap_err();
         assert!(err.requested >= 800);
-        assert_eq!(arena.alloc_slice::<u64>(usize::MAX).unwrap_err().available, 16);
+        assert_eq!(
+            arena.alloc_slice::<u64>(usize::MAX).unwrap_err().available,
+            16
+        );
         // Nothing was consumed by the failed requests.
         assert!(arena.alloc_slice::<u8>(8).is_ok());
     }

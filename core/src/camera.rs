@@ -121,19 +121,28 @@ impl Interior {
     }
 
     fn centre_px(&self) -> [f64; 2] {
-        [(self.width_px as f64 - 1.0) * 0.5, (self.height_px as f64 - 1.0) * 0.5]
+        [
+            (self.width_px as f64 - 1.0) * 0.5,
+            (self.height_px as f64 - 1.0) * 0.5,
+        ]
     }
 
     /// Pixel `(c, r)` to photo-coordinates `(x, y)` in mm (not corrected).
     pub fn pixel_to_photo(&self, c: f64, r: f64) -> [f64; 2] {
         let [cc, rc] = self.centre_px();
-        [(c - cc) * self.pixel_size_mm[0], -(r - rc) * self.pixel_size_mm[1]]
+        [
+            (c - cc) * self.pixel_size_mm[0],
+            -(r - rc) * self.pixel_size_mm[1],
+        ]
     }
 
     /// Photo-coordinates `(x, y)` in mm to pixel `(c, r)`.
     pub fn photo_to_pixel(&self, x: f64, y: f64) -> [f64; 2] {
         let [cc, rc] = self.centre_px();
-        [x / self.pixel_size_mm[0] + cc, -y / self.pixel_size_mm[1] + rc]
+        [
+            x / self.pixel_size_mm[0] + cc,
+            -y / self.pixel_size_mm[1] + rc,
+        ]
     }
 
     /// Distortion `(dx, dy)` at reduced coordinates `(xb, yb)` (relative to the principal point).
@@ -206,7 +215,10 @@ impl Interior {
             xb -= sx;
             yb -= sy;
             if sx.abs() < UNDISTORT_TOL_MM && sy.abs() < UNDISTORT_TOL_MM {
-                return Ok([xb + self.principal_point_mm[0], yb + self.principal_point_mm[1]]);
+                return Ok([
+                    xb + self.principal_point_mm[0],
+                    yb + self.principal_point_mm[1],
+                ]);
             }
         }
         Err(CameraError::DistortionDiverged)
@@ -329,7 +341,12 @@ impl Pose {
     /// From a rotation matrix `M` (object to camera) and a centre.
     pub fn from_rotation(m: &Matrix3<f64>, centre: [f64; 3]) -> Self {
         let [omega, phi, kappa] = angles_from_rotation(m);
-        Pose { omega, phi, kappa, centre }
+        Pose {
+            omega,
+            phi,
+            kappa,
+            centre,
+        }
     }
 
     pub fn rotation(&self) -> Matrix3<f64> {
@@ -347,7 +364,12 @@ impl Pose {
     }
 
     pub fn from_params(p: &[f64; 6]) -> Self {
-        Pose { omega: p[0], phi: p[1], kappa: p[2], centre: [p[3], p[4], p[5]] }
+        Pose {
+            omega: p[0],
+            phi: p[1],
+            kappa: p[2],
+            centre: [p[3], p[4], p[5]],
+        }
     }
 
     /// `(u, v, w) = M (P - C)`: the point in this camera's frame.
@@ -397,7 +419,8 @@ pub fn project_with_jacobians(
     // d(xc) = (-f/w) du + (f u / w^2) dw, and likewise for yc with v.
     let gx = [-f / w, 0.0, f * u / (w * w)];
     let gy = [0.0, -f / w, f * v / (w * w)];
-    let chain = |g: &[f64; 3], duvw: &Vector3<f64>| g[0] * duvw[0] + g[1] * duvw[1] + g[2] * duvw[2];
+    let chain =
+        |g: &[f64; 3], duvw: &Vector3<f64>| g[0] * duvw[0] + g[1] * duvw[1] + g[2] * duvw[2];
 
     let mut d_pose = [[0.0; 6]; 2];
     let mut d_point = [[0.0; 3]; 2];
@@ -447,7 +470,12 @@ pub struct Rig {
 impl Rig {
     /// A rectified rig: identical ideal cameras, no relative rotation, base `(b, 0, 0)`.
     pub fn rectified(camera: Interior, base_m: f64) -> Self {
-        Rig { left: camera, right: camera, relative_angles: [0.0; 3], base_m: [base_m, 0.0, 0.0] }
+        Rig {
+            left: camera,
+            right: camera,
+            relative_angles: [0.0; 3],
+            base_m: [base_m, 0.0, 0.0],
+        }
     }
 
     pub fn relative_rotation(&self) -> Matrix3<f64> {
@@ -471,7 +499,11 @@ impl Rig {
     pub fn validate(&self) -> Result<(), CameraError> {
         self.left.validate()?;
         self.right.validate()?;
-        let finite = self.relative_angles.iter().chain(self.base_m.iter()).all(|v| v.is_finite());
+        let finite = self
+            .relative_angles
+            .iter()
+            .chain(self.base_m.iter())
+            .all(|v| v.is_finite());
         if finite {
             Ok(())
         } else {

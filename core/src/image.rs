@@ -13,7 +13,12 @@ pub enum ImageError {
     /// The buffer holds fewer bytes than `stride * (height - 1) + width`.
     BufferTooSmall { needed: usize, got: usize },
     /// The image is larger than the configured capacity.
-    TooLarge { width: usize, height: usize, max_width: usize, max_height: usize },
+    TooLarge {
+        width: usize,
+        height: usize,
+        max_width: usize,
+        max_height: usize,
+    },
 }
 
 impl core::fmt::Display for ImageError {
@@ -24,7 +29,12 @@ impl core::fmt::Display for ImageError {
             ImageError::BufferTooSmall { needed, got } => {
                 write!(f, "image buffer holds {got} bytes, {needed} needed")
             }
-            ImageError::TooLarge { width, height, max_width, max_height } => write!(
+            ImageError::TooLarge {
+                width,
+                height,
+                max_width,
+                max_height,
+            } => write!(
                 f,
                 "image {width}x{height} exceeds the configured capacity {max_width}x{max_height}"
             ),
@@ -63,11 +73,22 @@ impl<'a> ImageView<'a> {
         let needed = stride
             .checked_mul(height - 1)
             .and_then(|n| n.checked_add(width))
-            .ok_or(ImageError::BufferTooSmall { needed: usize::MAX, got: data.len() })?;
+            .ok_or(ImageError::BufferTooSmall {
+                needed: usize::MAX,
+                got: data.len(),
+            })?;
         if data.len() < needed {
-            return Err(ImageError::BufferTooSmall { needed, got: data.len() });
+            return Err(ImageError::BufferTooSmall {
+                needed,
+                got: data.len(),
+            });
         }
-        Ok(ImageView { data, width, height, stride })
+        Ok(ImageView {
+            data,
+            width,
+            height,
+            stride,
+        })
     }
 
     pub fn width(&self) -> usize {
@@ -134,10 +155,16 @@ mod tests {
     fn rejects_bad_shapes() {
         let buf = [0u8; 10];
         assert_eq!(ImageView::new(&buf, 0, 3).unwrap_err(), ImageError::Empty);
-        assert_eq!(ImageView::with_stride(&buf, 4, 2, 3).unwrap_err(), ImageError::BadStride);
+        assert_eq!(
+            ImageView::with_stride(&buf, 4, 2, 3).unwrap_err(),
+            ImageError::BadStride
+        );
         assert!(matches!(
             ImageView::new(&buf, 4, 3).unwrap_err(),
-            ImageError::BufferTooSmall { needed: 12, got: 10 }
+            ImageError::BufferTooSmall {
+                needed: 12,
+                got: 10
+            }
         ));
         // stride * (h-1) + w = 4*2 + 2 = 10 fits exactly.
         let v = ImageView::with_stride(&buf, 2, 3, 4).unwrap();

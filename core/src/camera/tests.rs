@@ -6,7 +6,10 @@ use super::*;
 struct Lcg(u64);
 impl Lcg {
     fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         lo + (hi - lo) * ((self.0 >> 11) as f64 / (1u64 << 53) as f64)
     }
 }
@@ -73,7 +76,11 @@ fn uncorrect_reports_divergence_instead_of_looping() {
 fn rotation_angles_round_trip_and_orthonormal() {
     let mut rng = Lcg(3);
     for _ in 0..200 {
-        let a = [rng.uniform(-3.1, 3.1), rng.uniform(-1.5, 1.5), rng.uniform(-3.1, 3.1)];
+        let a = [
+            rng.uniform(-3.1, 3.1),
+            rng.uniform(-1.5, 1.5),
+            rng.uniform(-3.1, 3.1),
+        ];
         let m = rotation(a[0], a[1], a[2]);
         assert!((m * m.transpose() - Matrix3::identity()).norm() < 1e-12);
         assert!((m.determinant() - 1.0).abs() < 1e-12);
@@ -94,7 +101,10 @@ fn level_camera_looks_along_plus_y() {
     assert!(close(right[0], 1.0, 1e-12) && right[1].abs() < 1e-12);
     let up = project(&pose, f, &[0.0, 10.0, 2.0]).unwrap();
     assert!(close(up[1], 2.0, 1e-12) && up[0].abs() < 1e-12);
-    assert_eq!(project(&pose, f, &[0.0, -10.0, 0.0]), Err(CameraError::BehindCamera));
+    assert_eq!(
+        project(&pose, f, &[0.0, -10.0, 0.0]),
+        Err(CameraError::BehindCamera)
+    );
 }
 
 /// Seed 000 normal case: B = 0.40 m, f = 34.6041 mm, x' = 2 mm, x'' = 1 mm gives
@@ -121,7 +131,11 @@ fn random_pose(rng: &mut Lcg) -> Pose {
         omega: rng.uniform(1.2, 1.9),
         phi: rng.uniform(-0.4, 0.4),
         kappa: rng.uniform(-0.4, 0.4),
-        centre: [rng.uniform(-5.0, 5.0), rng.uniform(-5.0, 5.0), rng.uniform(-1.0, 1.0)],
+        centre: [
+            rng.uniform(-5.0, 5.0),
+            rng.uniform(-5.0, 5.0),
+            rng.uniform(-1.0, 1.0),
+        ],
     }
 }
 
@@ -134,7 +148,8 @@ fn projection_jacobians_match_central_differences() {
         let pose = random_pose(&mut rng);
         // A point in front: along the viewing direction (-z of the camera) at 5..40 m.
         let m = pose.rotation();
-        let dir = m.transpose() * Vector3::new(rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3), -1.0);
+        let dir =
+            m.transpose() * Vector3::new(rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3), -1.0);
         let p = pose.centre_vec() + dir * rng.uniform(5.0, 40.0);
         let point = [p[0], p[1], p[2]];
         let proj = project_with_jacobians(&pose, f, &point).unwrap();
@@ -149,7 +164,11 @@ fn projection_jacobians_match_central_differences() {
             let pb = project(&Pose::from_params(&b), f, &point).unwrap();
             for i in 0..2 {
                 let num = (pa[i] - pb[i]) / (2.0 * h);
-                assert!(close(proj.d_pose[i][k], num, 1e-6), "pose {k} {i}: {} vs {num}", proj.d_pose[i][k]);
+                assert!(
+                    close(proj.d_pose[i][k], num, 1e-6),
+                    "pose {k} {i}: {} vs {num}",
+                    proj.d_pose[i][k]
+                );
             }
         }
         for k in 0..3 {
@@ -231,7 +250,10 @@ fn kitti_pose_round_trip_and_conventions() {
         }
     }
     // One metre forward (+Y) is +z in KITTI; one metre up is -y (KITTI y down).
-    let fwd = Pose { centre: [0.0, 1.0, 0.5], ..origin };
+    let fwd = Pose {
+        centre: [0.0, 1.0, 0.5],
+        ..origin
+    };
     let k = kitti_from_pose(&origin, &fwd);
     assert!((k[2][3] - 1.0).abs() < 1e-12 && (k[1][3] + 0.5).abs() < 1e-12);
     let mut rng = Lcg(6);
