@@ -33,17 +33,18 @@ pub struct DecoderCounters {
 /// non-empty run, the packet or why it was dropped.
 pub type Feed<'s> = (usize, Option<Result<Packet<&'s [u8]>, DecodeError>>);
 
-/// The streaming decoder over a caller-provided buffer (size it with
-/// [`super::MAX_ENCODED`] to accept every legal packet).
-pub struct Decoder<'a> {
-    buf: &'a mut [u8],
+/// The streaming decoder over a caller-provided buffer (`&mut [u8]` on the
+/// firmware, an owned buffer on the host; size it with [`super::MAX_ENCODED`]
+/// to accept every legal packet).
+pub struct Decoder<B> {
+    buf: B,
     len: usize,
     overflow: bool,
     counters: DecoderCounters,
 }
 
-impl<'a> Decoder<'a> {
-    pub fn new(buf: &'a mut [u8]) -> Self {
+impl<B: AsMut<[u8]>> Decoder<B> {
+    pub fn new(buf: B) -> Self {
         Decoder {
             buf,
             len: 0,
@@ -68,11 +69,12 @@ impl<'a> Decoder<'a> {
     pub fn feed<'s>(&'s mut self, input: &[u8]) -> Feed<'s> {
         let delim = input.iter().position(|&b| b == 0);
         let data = &input[..delim.unwrap_or(input.len())];
-        let room = self.buf.len() - self.len;
+        let buf = self.buf.as_mut();
+        let room = buf.len() - self.len;
         if data.len() > room || self.overflow {
             self.overflow = true;
         } else {
-            self.buf[self.len..self.len + data.len()].copy_from_slice(data);
+            buf[self.len..self.len + data.len()].copy_from_slice(data);
             self.len += data.len();
         }
         let Some(pos) = delim else {
@@ -90,14 +92,14 @@ impl<'a> Decoder<'a> {
             // Back-to-back delimiters: senders may flush the line with them.
             return (consumed, None);
         }
-        let n = match cobs::decode_in_place(&mut self.buf[..len]) {
+        let n = match cobs::decode_in_place(&mut buf[..len]) {
             Ok(n) => n,
             Err(_) => {
                 self.counters.framing_errors += 1;
                 return (consumed, Some(Err(DecodeError::Framing)));
             }
         };
-        match Packet::new_checked(&self.buf[..n]) {
+        match Packet::new_checked(&buf[..n]) {
             Ok(p) => {
                 self.counters.packets += 1;
                 (consumed, Some(Ok(p)))
