@@ -1,0 +1,216 @@
+//! 3x3x3 extrema of the integer difference of Gaussians, then sub-pixel and
+//! sub-scale refinement (Lowe's quadratic fit, as in OpenCV's adjustLocalExtrema)
+//! with contrast and edge rejection.
+
+use super::config::{BORDER, FRAC_BITS, REFINE_ROWS};
+use super::levels::Levels;
+use super::pending::Pending;
+
+/// Most refinement steps.
+const MAX_STEPS: usize = 5;
+
+/// Constants of the refinement derived from the configuration.
+#[derive(Debug, Clone, Copy)]
+pub struct RefineParams {
+    /// Detection layers per octave (`s`).
+    pub levels: usize,
+    /// Contrast threshold (grey levels / 255, before division by `levels`).
+    pub contrast: f32,
+    /// Edge threshold `r` (ratio of principal curvatures).
+    pub edge: f32,
+}
+
+/// Integer threshold of the extremum search: half the final contrast threshold,
+/// in the 6-fractional-bit level format (OpenCV's prelimContrastThr).
+pub fn prelim_threshold(contrast: f32, levels: usize) -> i32 {
+    let t = 0.5 * contrast / levels as f32 * 255.0 * (1 << FRAC_BITS) as f32;
+    libm::floorf(t) as i32
+}
+
+/// Is `v` (the DoG at `cur[c]`) an extremum over its 26 neighbours?
+/// `rows` are the nine rows: layer below (r-1, r, r+1), this layer, layer above.
+#[inline]
+pub fn is_extremum(rows: &[&[i16]; 9], c: usize, v: i16) -> bool {
+    if v > 0 {
+        for (i, row) in rows.iter().enumerate() {
+            let n = &row[c - 1..c + 2];
+            if i == 4 {
+                if v < n[0] || v < n[2] {
+                    return false;
+                }
+            } else if v < n[0] || v < n[1] || v < n[2] {
+                return false;
+            }
+        }
+    } else {
+        for (i, row) in rows.iter().enumerate() {
+            let n = &row[c - 1..c + 2];
+            if i == 4 {
+                if v > n[0] || v > n[2] {
+                    return false;
+                }
+            } else if v > n[0] || v > n[1] || v > n[2] {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// What refinement made of a candidate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Refined {
+    Kept(Pending),
+    /// Did not converge, or moved out of the octave, its layers or the streaming window.
+    Unstable,
+    LowContrast,
+    Edge,
+}
+
+/// Refines an extremum found at (`c`, `r`) in DoG layer `layer` of the octave.
+/// Rows read stay within `r_det +- REFINE_ROWS`, which the rings hold.
+pub fn refine(lv: &Levels, p: &RefineParams, c: usize, r: usize, layer: usize) -> Refined {
+    let scale = 1.0 / (255.0 * (1 << FRAC_BITS) as f32);
+    let (w, h) = (lv.w as isize, lv.h as isize);
+    let r_det = r as isize;
+    let (mut c, mut r, mut k) = (c as isize, r as isize, layer as isize);
+    let mut x = [0f32; 3];
+    let mut grad = [0f32; 3];
+    let mut converged = false;
+    for _ in 0..MAX_STEPS {
+        let ku = k as usize;
+        let d = |kk: usize, rr: isize, cc: isize| lv.dog(kk, rr, cc) as f32;
+        let v2 = 2.0 * d(ku, r, c);
+        grad = [
+            (d(ku, r, c + 1) - d(ku, r, c - 1)) * 0.5 * scale,
+            (d(ku, r + 1, c) - d(ku, r - 1, c)) * 0.5 * scale,
+            (d(ku + 1, r, c) - d(ku - 1, r, c)) * 0.5 * scale,
+        ];
+        let dxx = (d(ku, r, c + 1) + d(ku, r, c - 1) - v2) * scale;
+        let dyy = (d(ku, r + 1, c) + d(ku, r - 1, c) - v2) * scale;
+        let dss = (d(ku + 1, r, c) + d(ku - 1, r, c) - v2) * scale;
+        let dxy = (d(ku, r + 1, c + 1) - d(ku, r + 1, c - 1) - d(ku, r - 1, c + 1)
+            + d(ku, r - 1, c - 1))
+            * 0.25
+            * scale;
+        let dxs = (d(ku + 1, r, c + 1) - d(ku + 1, r, c - 1) - d(ku - 1, r, c + 1)
+            + d(ku - 1, r, c - 1))
+            * 0.25
+            * scale;
+        let dys = (d(ku + 1, r + 1, c) - d(ku + 1, r - 1, c) - d(ku - 1, r + 1, c)
+            + d(ku - 1, r - 1, c))
+            * 0.25
+            * scale;
+        let hm = [[dxx, dxy, dxs], [dxy, dyy, dys], [dxs, dys, dss]];
+        x = match solve3(&hm, &grad) {
+            Some(s) => [-s[0], -s[1], -s[2]],
+            None => return Refined::Unstable,
+        };
+        if x.iter().all(|v| v.abs() < 0.5) {
+            converged = true;
+            break;
+        }
+        if x.iter().any(|v| v.is_nan() || v.abs() >= 1.0e6) {
+            return Refined::Unstable;
+        }
+        c += libm::roundf(x[0]) as isize;
+        r += libm::roundf(x[1]) as isize;
+        k += libm::roundf(x[2]) as isize;
+        if k < 1
+            || k > p.levels as isize
+            || c < BORDER as isize
+            || c >= w - BORDER as isize
+            || r < BORDER as isize
+            || r >= h - BORDER as isize
+            || (r - r_det).abs() > REFINE_ROWS as isize - 1
+        {
+            return Refined::Unstable;
+        }
+    }
+    if !converged {
+        return Refined::Unstable;
+    }
+    let ku = k as usize;
+    let v = lv.dog(ku, r, c) as f32 * scale;
+    let contrast = v + 0.5 * (grad[0] * x[0] + grad[1] * x[1] + grad[2] * x[2]);
+    if contrast.abs() * (p.levels as f32) < p.contrast {
+        return Refined::LowContrast;
+    }
+    // Principal curvature ratio from the 2x2 spatial Hessian at the final sample.
+    let d = |rr: isize, cc: isize| lv.dog(ku, rr, cc) as f32;
+    let v2 = 2.0 * d(r, c);
+    let dxx = d(r, c + 1) + d(r, c - 1) - v2;
+    let dyy = d(r + 1, c) + d(r - 1, c) - v2;
+    let dxy = (d(r + 1, c + 1) - d(r + 1, c - 1) - d(r - 1, c + 1) + d(r - 1, c - 1)) * 0.25;
+    let tr = dxx + dyy;
+    let det = dxx * dyy - dxy * dxy;
+    let e = p.edge;
+    if det <= 0.0 || tr * tr * e >= (e + 1.0) * (e + 1.0) * det {
+        return Refined::Edge;
+    }
+    Refined::Kept(Pending {
+        x: c as f32 + x[0],
+        y: r as f32 + x[1],
+        layer: k as f32 + x[2],
+        response: contrast.abs(),
+        row: r_det as i32,
+        level: ku as u32,
+    })
+}
+
+/// Solves the symmetric 3x3 system `H s = b` by Cramer's rule; `None` when singular.
+fn solve3(m: &[[f32; 3]; 3], b: &[f32; 3]) -> Option<[f32; 3]> {
+    let det3 = |a: &[[f32; 3]; 3]| {
+        a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
+            - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+            + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
+    };
+    let det = det3(m);
+    if !det.is_finite() || det.abs() <= 1e-30 {
+        return None;
+    }
+    let mut out = [0f32; 3];
+    for (i, o) in out.iter_mut().enumerate() {
+        let mut a = *m;
+        for row in 0..3 {
+            a[row][i] = b[row];
+        }
+        *o = det3(&a) / det;
+    }
+    Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cramer_solves_and_refuses_singular() {
+        let m = [[4.0, 1.0, 0.5], [1.0, 3.0, 0.25], [0.5, 0.25, 2.0]];
+        let s = solve3(&m, &[1.0, 2.0, 3.0]).unwrap();
+        for i in 0..3 {
+            let b: f32 = (0..3).map(|j| m[i][j] * s[j]).sum();
+            assert!((b - [1.0, 2.0, 3.0][i]).abs() < 1e-5);
+        }
+        assert!(solve3(
+            &[[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 0.0, 1.0]],
+            &[1.0; 3]
+        )
+        .is_none());
+    }
+
+    #[test]
+    fn extremum_needs_all_neighbours() {
+        let flat = [0i16; 5];
+        let mut mid = [0i16; 5];
+        mid[2] = 9;
+        let rows: [&[i16]; 9] = [&flat, &flat, &flat, &flat, &mid, &flat, &flat, &flat, &flat];
+        assert!(is_extremum(&rows, 2, 9));
+        let mut above = [0i16; 5];
+        above[3] = 10;
+        let rows: [&[i16]; 9] = [
+            &flat, &flat, &flat, &flat, &mid, &flat, &flat, &above, &flat,
+        ];
+        assert!(!is_extremum(&rows, 2, 9));
+    }
+}

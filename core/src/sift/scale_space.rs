@@ -1,0 +1,189 @@
+//! Fixed-point separable Gaussian smoothing over rows: Q14 symmetric kernels,
+//! levels stored as i16 grey levels times 64 (6 fractional bits).
+//!
+//! The pipeline is streaming: each level keeps only a ring of rows. Level 0 of an
+//! octave reads its source (the input image or the decimated octave base) at random,
+//! levels >= 1 receive each new row of the level below, blur it horizontally into
+//! their own ring of `2 r + 1` rows and blur that ring vertically. Borders replicate
+//! the edge pixel, which keeps the vertical pass causal at the top of the image.
+
+use super::config::{KERNEL_BITS, KERNEL_STRIDE};
+
+/// Fills `taps[0..=radius]` (centre first, then one side) with a Q14 Gaussian whose
+/// full symmetric sum is exactly `1 << KERNEL_BITS`.
+pub fn make_kernel(sigma: f32, radius: usize, taps: &mut [i32]) {
+    let taps = &mut taps[..KERNEL_STRIDE];
+    taps.fill(0);
+    let radius = radius.min(KERNEL_STRIDE - 1);
+    if radius == 0 || sigma <= 0.0 {
+        taps[0] = 1 << KERNEL_BITS;
+        return;
+    }
+    let mut w = [0f32; KERNEL_STRIDE];
+    let mut sum = 0.0;
+    for (i, wi) in w.iter_mut().enumerate().take(radius + 1) {
+        let x = i as f32;
+        *wi = libm::expf(-x * x / (2.0 * sigma * sigma));
+        sum += if i == 0 { *wi } else { 2.0 * *wi };
+    }
+    let one = (1i32 << KERNEL_BITS) as f32;
+    let mut total = 0;
+    for i in 0..=radius {
+        taps[i] = libm::roundf(w[i] / sum * one) as i32;
+        total += if i == 0 { taps[i] } else { 2 * taps[i] };
+    }
+    // Put the rounding remainder in the centre so flat regions stay exactly flat.
+    taps[0] += (1 << KERNEL_BITS) - total;
+}
+
+#[inline]
+fn round_q14(acc: i32) -> i16 {
+    let v = (acc + (1 << (KERNEL_BITS - 1))) >> KERNEL_BITS;
+    v.clamp(i16::MIN as i32, i16::MAX as i32) as i16
+}
+
+/// Horizontal pass of one row: `out[c] = sum_j k_j * in[clamp(c + j)]`.
+/// `pad` needs `w + 2 * radius` values and `acc` `w`.
+pub fn blur_row(
+    input: &[i16],
+    taps: &[i32],
+    radius: usize,
+    pad: &mut [i16],
+    acc: &mut [i32],
+    out: &mut [i16],
+) {
+    let w = input.len().min(out.len()).min(acc.len());
+    if w == 0 {
+        return;
+    }
+    if radius == 0 {
+        out[..w].copy_from_slice(&input[..w]);
+        return;
+    }
+    let pad = &mut pad[..w + 2 * radius];
+    let (left, rest) = pad.split_at_mut(radius);
+    let (mid, right) = rest.split_at_mut(w);
+    left.fill(input[0]);
+    mid.copy_from_slice(&input[..w]);
+    right.fill(input[w - 1]);
+    let pad = &*pad;
+    let acc = &mut acc[..w];
+    let k0 = taps[0];
+    for (a, &p) in acc.iter_mut().zip(&pad[radius..radius + w]) {
+        *a = k0 * p as i32;
+    }
+    for (j, &kj) in taps.iter().enumerate().take(radius + 1).skip(1) {
+        let lo = &pad[radius - j..radius - j + w];
+        let hi = &pad[radius + j..radius + j + w];
+        for ((a, &l), &h) in acc.iter_mut().zip(lo).zip(hi) {
+            *a += kj * (l as i32 + h as i32);
+        }
+    }
+    for (o, &a) in out[..w].iter_mut().zip(acc.iter()) {
+        *o = round_q14(a);
+    }
+}
+
+/// Vertical pass: `rows[j]` is the row at offset `j - radius` (already clamped by the caller).
+pub fn blur_column<'r>(
+    rows: impl Fn(usize) -> &'r [i16],
+    taps: &[i32],
+    radius: usize,
+    acc: &mut [i32],
+    out: &mut [i16],
+) {
+    let w = out.len().min(acc.len());
+    let acc = &mut acc[..w];
+    let centre = rows(radius);
+    let k0 = taps[0];
+    for (a, &p) in acc.iter_mut().zip(&centre[..w]) {
+        *a = k0 * p as i32;
+    }
+    for (j, &kj) in taps.iter().enumerate().take(radius + 1).skip(1) {
+        let lo = &rows(radius - j)[..w];
+        let hi = &rows(radius + j)[..w];
+        for ((a, &l), &h) in acc.iter_mut().zip(lo).zip(hi) {
+            *a += kj * (l as i32 + h as i32);
+        }
+    }
+    for (o, &a) in out[..w].iter_mut().zip(acc.iter()) {
+        *o = round_q14(a);
+    }
+}
+
+/// Vertical pass over u8 rows, scaling to the 6-fractional-bit level format.
+pub fn blur_column_u8<'r>(
+    rows: impl Fn(usize) -> &'r [u8],
+    taps: &[i32],
+    radius: usize,
+    acc: &mut [i32],
+    out: &mut [i16],
+) {
+    let w = out.len().min(acc.len());
+    let acc = &mut acc[..w];
+    let shift = super::config::FRAC_BITS;
+    let centre = rows(radius);
+    let k0 = taps[0] << shift;
+    for (a, &p) in acc.iter_mut().zip(&centre[..w]) {
+        *a = k0 * p as i32;
+    }
+    for (j, &t) in taps.iter().enumerate().take(radius + 1).skip(1) {
+        let kj = t << shift;
+        let lo = &rows(radius - j)[..w];
+        let hi = &rows(radius + j)[..w];
+        for ((a, &l), &h) in acc.iter_mut().zip(lo).zip(hi) {
+            *a += kj * (l as i32 + h as i32);
+        }
+    }
+    for (o, &a) in out[..w].iter_mut().zip(acc.iter()) {
+        *o = round_q14(a);
+    }
+}
+
+/// Row `r + j - radius` clamped into `0..h`.
+#[inline]
+pub fn clamp_row(r: usize, j: usize, radius: usize, h: usize) -> usize {
+    (r + j).saturating_sub(radius).min(h - 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kernel_sums_to_one_and_keeps_flat_rows_flat() {
+        let mut taps = [0i32; KERNEL_STRIDE];
+        for &(s, r) in &[(0.8f32, 3usize), (1.6, 5), (3.1, 10)] {
+            make_kernel(s, r, &mut taps);
+            let sum: i32 = taps[0] + 2 * taps[1..=r].iter().sum::<i32>();
+            assert_eq!(sum, 1 << KERNEL_BITS);
+            assert!(taps[..=r].windows(2).all(|p| p[0] >= p[1]));
+            let input = [1234i16; 17];
+            let mut pad = [0i16; 17 + 2 * KERNEL_STRIDE];
+            let mut acc = [0i32; 17];
+            let mut out = [0i16; 17];
+            blur_row(&input, &taps, r, &mut pad, &mut acc, &mut out);
+            assert_eq!(out, input);
+        }
+    }
+
+    #[test]
+    fn blur_matches_float_convolution() {
+        let mut taps = [0i32; KERNEL_STRIDE];
+        make_kernel(1.5, 5, &mut taps);
+        let input: [i16; 32] = core::array::from_fn(|i| ((i * 37) % 101) as i16 * 64);
+        let mut pad = [0i16; 32 + 2 * KERNEL_STRIDE];
+        let mut acc = [0i32; 32];
+        let mut out = [0i16; 32];
+        blur_row(&input, &taps, 5, &mut pad, &mut acc, &mut out);
+        for (c, &o) in out.iter().enumerate() {
+            let mut f = 0.0f64;
+            for j in -5i32..=5 {
+                let k = taps[j.unsigned_abs() as usize] as f64 / 16384.0;
+                let cc = (c as i32 + j).clamp(0, 31) as usize;
+                f += k * input[cc] as f64;
+            }
+            assert!((f - o as f64).abs() <= 0.5 + 1e-9, "c {c}: {f} vs {o}");
+        }
+    }
+}

@@ -1,0 +1,1 @@
+//! Extractor tests: synthetic images with known structure, memory, determinism, bad input.
