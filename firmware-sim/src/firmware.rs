@@ -169,7 +169,16 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
             ComponentKind::Frame,
             slice_bytes::<u8>(frame),
         );
-        self.factory.budget(config, &mut budget);
+        if let Err(e) = self.factory.budget(config, &mut budget) {
+            link.tx.error(
+                port,
+                ErrorCode::ConfigInvalid,
+                u32::MAX,
+                u16::MAX,
+                format_args!("processor: {e:?}"),
+            )?;
+            return Ok(Next::Idle);
+        }
         let capacity = self.work.len();
         if budget.total() > capacity {
             link.tx.error(

@@ -16,4 +16,5 @@ pub use firmware::{Firmware, Limits, FIRMWARE_VERSION};
 pub use link::LinkBuffers;
 pub use processor::{
     Clock, EpochInput, EpochOutput, EpochProcessor, ImageStatsFactory, NoClock, ProcessorFactory,
+    SiftFactory,
 };

@@ -760,6 +760,29 @@ impl<T: Transport> Session<T> {
     }
 }
 
+/// Opens the link the options name and says hello: what `phototraverse run` calls.
+pub fn connect(link: &LinkOptions) -> anyhow::Result<Session<Box<dyn Transport>>> {
+    let t = link.open()?;
+    Ok(Session::open(t, SessionOptions::from_link(link))?)
+}
+
+impl<T: Transport> Session<T> {
+    /// Configures, streams every epoch and waits for all results: the whole
+    /// session in one call.
+    pub fn run<'a>(
+        &mut self,
+        config: &Configure,
+        epochs: impl IntoIterator<Item = EpochFrames<'a>>,
+    ) -> Result<SessionReport, SessionError> {
+        self.configure(config)?;
+        for f in epochs {
+            self.send_epoch(&f)?;
+        }
+        self.finish()?;
+        Ok(self.report())
+    }
+}
+
 /// Bytes on the wire for one stereo epoch of `frame_bytes` per camera sent in
 /// `chunk`-byte chunks, framing included (COBS worst case: no zero bytes in the data).
 pub fn epoch_wire_bytes(frame_bytes: usize, chunk: usize) -> usize {
@@ -768,7 +791,7 @@ pub fn epoch_wire_bytes(frame_bytes: usize, chunk: usize) -> usize {
     let last = frame_bytes - full * chunk;
     let per_camera = full * wire_len(CHUNK_HEADER_LEN + chunk)
         + if last > 0 { wire_len(CHUNK_HEADER_LEN + last) } else { 0 }
-        + wire_len(18) // FrameBegin
+        + wire_len(19) // FrameBegin
         + wire_len(13); // FrameEnd
     debug_assert!(chunks >= full);
     2 * per_camera

@@ -9,24 +9,70 @@ use phototraverse_core::protocol::messages::{
 use phototraverse_core::protocol::{encode_packet, Header, MAX_PACKET};
 use phototraverse_host::link::inproc::InProc;
 use phototraverse_host::link::net::{Pty, SerialLink, TcpLink};
-use phototraverse_host::link::{child, FaultConfig, Faulty, LinkKind, LinkOptions, Transport};
+use phototraverse_host::link::{
+    child, FaultConfig, FaultCounters, Faulty, FirmwareProcessor, LinkKind, LinkOptions, Transport,
+};
 use phototraverse_host::session::{EpochFrames, Session, SessionError, SessionOptions};
 use std::io;
 use std::time::Duration;
 
-const W: u16 = 96;
-const H: u16 = 64;
+const W: u16 = 128;
+const H: u16 = 96;
 
-/// A textured test image that changes with the epoch and the camera.
+/// A test image of Gaussian blobs and a ramp; it moves with the epoch and is
+/// shifted for the right camera (disparity).
 fn image(epoch: u32, camera: u32, w: u16, h: u16) -> Vec<u8> {
+    let mut seed = 12345u32;
+    let mut next = || {
+        seed = seed.wrapping_mul(1_103_515_245).wrapping_add(12345);
+        (seed >> 8) as f64 / (1u32 << 24) as f64
+    };
+    let blobs: Vec<[f64; 4]> = (0..14)
+        .map(|_| {
+            [
+                next() * w as f64,
+                next() * h as f64,
+                2.0 + 4.0 * next(),
+                next(),
+            ]
+        })
+        .collect();
+    let shift = 1.5 * epoch as f64 + 4.0 * camera as f64;
     let mut v = Vec::with_capacity(w as usize * h as usize);
-    for r in 0..h as u32 {
-        for c in 0..w as u32 {
-            let x = c + 3 * epoch + 5 * camera;
-            v.push(((x * 7 + r * 13) % 251 + (x * r) % 5) as u8);
+    for r in 0..h as usize {
+        for c in 0..w as usize {
+            let mut val = 40.0 + 0.3 * c as f64;
+            for b in &blobs {
+                let (dx, dy) = (c as f64 + shift - b[0], r as f64 - b[1]);
+                let sign = if b[3] > 0.5 { 1.0 } else { -0.5 };
+                val += sign * 150.0 * (-(dx * dx + dy * dy) / (2.0 * b[2] * b[2])).exp();
+            }
+            v.push(val.clamp(0.0, 255.0) as u8);
         }
     }
     v
+}
+
+/// Keypoints the core's SIFT finds in an image under `config`, extracted here.
+fn local_keypoints(img: &[u8], w: u16, h: u16, config: &Configure) -> u32 {
+    use phototraverse_core::budget::{Arena, MemoryBudget};
+    use phototraverse_core::features::FeatureSet;
+    use phototraverse_core::image::ImageView;
+    use phototraverse_core::sift::Sift;
+    let cfg = phototraverse_firmware_sim::processor::sift_config(config);
+    let mut budget = MemoryBudget::new();
+    cfg.budget(&mut budget).unwrap();
+    FeatureSet::budget(cfg.max_keypoints, &mut budget, "kp", "desc");
+    let mut storage = vec![0u8; budget.total()];
+    let mut arena = Arena::new(&mut storage);
+    let mut sift = Sift::new(cfg, &mut arena).unwrap();
+    let mut set = FeatureSet::new(&mut arena, cfg.max_keypoints).unwrap();
+    sift.extract(
+        &ImageView::new(img, w as usize, h as usize).unwrap(),
+        &mut set,
+    )
+    .unwrap();
+    set.len() as u32
 }
 
 /// Mean and mean absolute gradient computed here independently of the firmware.
@@ -83,15 +129,29 @@ fn check_results<T: Transport>(s: &Session<T>, epochs: std::ops::Range<u32>, w: 
         let r = s
             .result(e)
             .unwrap_or_else(|| panic!("no result for epoch {e}"));
-        assert_eq!(r.status, status::STATS_ONLY, "epoch {e}");
-        let l = expected_stats(&image(e, 0, w, h), w as usize, h as usize);
-        let rr = expected_stats(&image(e, 1, w, h), w as usize, h as usize);
-        let want = [l[0], l[1], rr[0], rr[1]];
-        for (k, (got, want)) in r.extra.iter().zip(want).enumerate() {
+        let (li, ri) = (image(e, 0, w, h), image(e, 1, w, h));
+        if r.status == status::FEATURES_ONLY {
+            let cfg = config(w, h);
+            let want = [
+                local_keypoints(&li, w, h, &cfg),
+                local_keypoints(&ri, w, h, &cfg),
+            ];
+            assert_eq!(r.counts.keypoints, want, "epoch {e}");
             assert!(
-                (got - want).abs() < 1e-9,
-                "epoch {e} value {k}: {got} vs {want}"
+                want[0] > 10 && want[1] > 10,
+                "the test images need features: {want:?}"
             );
+        } else {
+            assert_eq!(r.status, status::STATS_ONLY, "epoch {e}");
+            let l = expected_stats(&li, w as usize, h as usize);
+            let rr = expected_stats(&ri, w as usize, h as usize);
+            let want = [l[0], l[1], rr[0], rr[1]];
+            for (k, (got, want)) in r.extra.iter().zip(want).enumerate() {
+                assert!(
+                    (got - want).abs() < 1e-9,
+                    "epoch {e} value {k}: {got} vs {want}"
+                );
+            }
         }
         let st = s.stats(e).expect("stats follow each result");
         assert!(st.memory_high_water as usize >= 2 * w as usize * h as usize);
@@ -109,13 +169,30 @@ fn full_session<T: Transport>(t: T, opts: SessionOptions, epochs: u32) -> Sessio
     s
 }
 
+/// A session with the shipped firmware: SIFT features on every epoch.
+fn sift_session<T: Transport>(t: T, epochs: u32) {
+    let s = full_session(t, SessionOptions::default(), epochs);
+    for e in 0..epochs {
+        assert_eq!(s.result(e).unwrap().status, status::FEATURES_ONLY);
+    }
+}
+
+/// The shipped firmware (SIFT) in process.
 fn inproc() -> InProc {
-    InProc::spawn(4 << 20, Default::default())
+    InProc::spawn(4 << 20, Default::default(), FirmwareProcessor::Sift)
+}
+
+/// The bring-up firmware: image statistics check every byte of the frames.
+fn inproc_stats() -> InProc {
+    InProc::spawn(4 << 20, Default::default(), FirmwareProcessor::Stats)
 }
 
 #[test]
 fn inproc_session_returns_a_result_per_epoch() {
+    let s = full_session(inproc_stats(), SessionOptions::default(), 4);
+    assert!(s.errors().is_empty(), "{:?}", s.errors());
     let s = full_session(inproc(), SessionOptions::default(), 6);
+    assert_eq!(s.result(5).unwrap().status, status::FEATURES_ONLY);
     let link = s.link_stats();
     assert_eq!(link.frame_bytes, 6 * 2 * W as u64 * H as u64);
     assert_eq!(
@@ -167,8 +244,8 @@ fn every_packet_fault_kind_is_survived() {
         rto: Duration::from_millis(50),
         ..Default::default()
     };
-    let s = full_session(Faulty::new(inproc(), faults), opts, 5);
-    let f = s.link_stats().faults.unwrap();
+    let s = full_session(Faulty::new(inproc_stats(), faults), opts, 5);
+    let f: [FaultCounters; 2] = s.link_stats().faults.unwrap();
     let total: u64 = f
         .iter()
         .map(|c| c.packets_truncated + c.packets_duplicated + c.packets_reordered)
@@ -176,15 +253,20 @@ fn every_packet_fault_kind_is_survived() {
     assert!(total > 0, "{f:?}");
 }
 
-/// Builds the firmware binary when the test runs without it (cargo test -p phototraverse-host).
+/// Builds the firmware binary (a no-op under `cargo test --workspace`, which
+/// built it with the same profile; needed under `cargo test -p phototraverse-host`).
 fn ensure_firmware_binary() {
-    if child::firmware_binary().is_ok() {
-        return;
-    }
+    static BUILT: std::sync::Once = std::sync::Once::new();
+    BUILT.call_once(build_firmware_binary);
+}
+
+fn build_firmware_binary() {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let ok = std::process::Command::new(cargo)
         .args([
             "build",
+            "--profile",
+            "test",
             "-p",
             "phototraverse-firmware-sim",
             "--bin",
@@ -202,19 +284,19 @@ fn child_process_session() {
     ensure_firmware_binary();
     let opts = LinkOptions {
         link: LinkKind::Child,
-        fw_memory: 1 << 20,
+        fw_memory: 4 << 20,
         ..Default::default()
     };
     let t = opts.open().unwrap();
-    full_session(t, SessionOptions::default(), 3);
+    sift_session(t, 3);
 }
 
 #[test]
 fn tcp_session_on_localhost() {
     ensure_firmware_binary();
-    let t = TcpLink::spawn(1 << 20).unwrap();
+    let t = TcpLink::spawn(4 << 20, FirmwareProcessor::Sift).unwrap();
     assert!(t.describe().contains("127.0.0.1"));
-    full_session(t, SessionOptions::default(), 3);
+    sift_session(t, 3);
 }
 
 /// `std::fs::File` as an `embedded_io` port for the firmware on a pty master.
@@ -243,17 +325,17 @@ impl embedded_io::Write for FilePort {
 
 #[test]
 fn serial_session_over_a_pseudo_terminal() {
-    use phototraverse_firmware_sim::{Firmware, ImageStatsFactory, LinkBuffers, NoClock};
+    use phototraverse_firmware_sim::{Firmware, LinkBuffers, NoClock, SiftFactory};
     let pty = Pty::open().unwrap();
     let master = pty.master.try_clone().unwrap();
     std::thread::spawn(move || {
-        let mut work = vec![0u8; 1 << 20];
+        let mut work = vec![0u8; 4 << 20];
         let mut buffers = Box::new(LinkBuffers::new());
-        let mut fw = Firmware::new(&mut work, ImageStatsFactory, NoClock, Default::default());
+        let mut fw = Firmware::new(&mut work, SiftFactory, NoClock, Default::default());
         let _ = fw.run(&mut FilePort(master), &mut buffers);
     });
     let t = SerialLink::open(pty.slave_path.to_str().unwrap(), 921_600).unwrap();
-    full_session(t, SessionOptions::default(), 2);
+    sift_session(t, 2);
 }
 
 fn raw_packet(version: u8) -> Vec<u8> {
@@ -327,7 +409,7 @@ fn bad_input_is_refused_clearly_and_the_session_goes_on() {
     };
     s.send_epoch(&f).unwrap();
     let text = wait_for_error(&mut s, ErrorCode::FrameTooLarge);
-    assert!(text.contains("192x64"), "{text}");
+    assert!(text.contains("256x96"), "{text}");
 
     // A chunk out of order: that epoch is lost.
     let img = image(0, 0, W, H);

@@ -1,12 +1,14 @@
 //! Host binary of the firmware: the same no_std loop, its link on stdin/stdout
 //! (default), a TCP socket (`--tcp ADDR`, listening) or a serial device
 //! (`--serial DEV --baud N`).
-use phototraverse_firmware_sim::{Clock, Firmware, ImageStatsFactory, Limits, LinkBuffers};
+use phototraverse_firmware_sim::{
+    Clock, Firmware, ImageStatsFactory, Limits, LinkBuffers, SiftFactory,
+};
 use std::io::{Read, Write};
 use std::time::Instant;
 
 const USAGE: &str = "usage: phototraverse-firmware-sim [--tcp ADDR | --serial DEV [--baud N]] \
-[--memory BYTES] [--max-width W] [--max-height H]";
+[--memory BYTES] [--max-width W] [--max-height H] [--processor sift|stats]";
 
 struct Options {
     tcp: Option<String>,
@@ -14,6 +16,8 @@ struct Options {
     baud: u32,
     memory: usize,
     limits: Limits,
+    /// Image statistics instead of SIFT (bring-up).
+    stats_only: bool,
 }
 
 fn parse_args() -> Result<Options, String> {
@@ -23,6 +27,7 @@ fn parse_args() -> Result<Options, String> {
         baud: 921_600,
         memory: 32 << 20,
         limits: Limits::default(),
+        stats_only: false,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -40,6 +45,13 @@ fn parse_args() -> Result<Options, String> {
             }
             "--max-height" => {
                 o.limits.max_height = value()?.parse().map_err(|e| format!("--max-height: {e}"))?
+            }
+            "--processor" => {
+                o.stats_only = match value()?.as_str() {
+                    "sift" => false,
+                    "stats" => true,
+                    other => return Err(format!("--processor: unknown {other:?} (sift or stats)")),
+                }
             }
             "-h" | "--help" => return Err(USAGE.to_string()),
             other => return Err(format!("unknown argument {other}\n{USAGE}")),
@@ -96,14 +108,13 @@ impl Clock for StdClock {
 fn serve<R: Read, W: Write>(o: &Options, rx: R, tx: W) -> std::io::Result<()> {
     let mut work = vec![0u8; o.memory];
     let mut buffers = Box::new(LinkBuffers::new());
-    let mut fw = Firmware::new(
-        &mut work,
-        ImageStatsFactory,
-        StdClock(Instant::now()),
-        o.limits,
-    );
     let mut port = Port { rx, tx };
-    fw.run(&mut port, &mut buffers)
+    let clock = StdClock(Instant::now());
+    if o.stats_only {
+        Firmware::new(&mut work, ImageStatsFactory, clock, o.limits).run(&mut port, &mut buffers)
+    } else {
+        Firmware::new(&mut work, SiftFactory, clock, o.limits).run(&mut port, &mut buffers)
+    }
 }
 
 fn main() {

@@ -31,8 +31,17 @@ pub fn firmware_binary() -> anyhow::Result<PathBuf> {
 }
 
 /// Arguments passed to every spawned firmware.
-pub fn firmware_args(memory: usize) -> Vec<String> {
-    vec!["--memory".into(), memory.to_string()]
+pub fn firmware_args(memory: usize, processor: super::FirmwareProcessor) -> Vec<String> {
+    let p = match processor {
+        super::FirmwareProcessor::Sift => "sift",
+        super::FirmwareProcessor::Stats => "stats",
+    };
+    vec![
+        "--memory".into(),
+        memory.to_string(),
+        "--processor".into(),
+        p.into(),
+    ]
 }
 
 /// Kills the child when the link is dropped, after closing its input.
@@ -59,10 +68,10 @@ pub struct ChildLink {
 }
 
 impl ChildLink {
-    pub fn spawn(memory: usize) -> anyhow::Result<Self> {
+    pub fn spawn(memory: usize, processor: super::FirmwareProcessor) -> anyhow::Result<Self> {
         let bin = firmware_binary()?;
         let mut child = Command::new(&bin)
-            .args(firmware_args(memory))
+            .args(firmware_args(memory, processor))
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
@@ -98,10 +107,13 @@ impl Transport for ChildLink {
 
 /// Spawns the firmware listening on TCP (an ephemeral 127.0.0.1 port) and
 /// returns the child and the address it printed.
-pub fn spawn_tcp_firmware(memory: usize) -> anyhow::Result<(ChildGuard, String)> {
+pub fn spawn_tcp_firmware(
+    memory: usize,
+    processor: super::FirmwareProcessor,
+) -> anyhow::Result<(ChildGuard, String)> {
     let bin = firmware_binary()?;
     let mut child = Command::new(&bin)
-        .args(firmware_args(memory))
+        .args(firmware_args(memory, processor))
         .args(["--tcp", "127.0.0.1:0"])
         .stdin(Stdio::null())
         .stdout(Stdio::piped())

@@ -1,7 +1,10 @@
 //! In-process link: the firmware loop on a thread, bytes through channels —
 //! still every byte through the protocol, only the wire is memory.
 use super::transport::Transport;
-use phototraverse_firmware_sim::{Clock, Firmware, ImageStatsFactory, Limits, LinkBuffers};
+use super::FirmwareProcessor;
+use phototraverse_firmware_sim::{
+    Clock, Firmware, ImageStatsFactory, Limits, LinkBuffers, SiftFactory,
+};
 use std::io;
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
 use std::thread::JoinHandle;
@@ -71,7 +74,7 @@ pub struct InProc {
 
 impl InProc {
     /// Starts the firmware loop with `memory` bytes of working storage.
-    pub fn spawn(memory: usize, limits: Limits) -> Self {
+    pub fn spawn(memory: usize, limits: Limits, processor: FirmwareProcessor) -> Self {
         let (host_tx, fw_rx) = mpsc::channel::<Vec<u8>>();
         let (fw_tx, host_rx) = mpsc::channel::<Vec<u8>>();
         let thread = std::thread::Builder::new()
@@ -79,12 +82,6 @@ impl InProc {
             .spawn(move || {
                 let mut work = vec![0u8; memory];
                 let mut buffers = Box::new(LinkBuffers::new());
-                let mut fw = Firmware::new(
-                    &mut work,
-                    ImageStatsFactory,
-                    StdClock(Instant::now()),
-                    limits,
-                );
                 let mut port = ChannelPort {
                     rx: fw_rx,
                     tx: fw_tx,
@@ -92,7 +89,16 @@ impl InProc {
                     pos: 0,
                     out: Vec::new(),
                 };
-                let _ = fw.run(&mut port, &mut buffers);
+                let clock = StdClock(Instant::now());
+                // The loop ends at end of input; a port error means the host went away.
+                let _ = match processor {
+                    FirmwareProcessor::Sift => Firmware::new(&mut work, SiftFactory, clock, limits)
+                        .run(&mut port, &mut buffers),
+                    FirmwareProcessor::Stats => {
+                        Firmware::new(&mut work, ImageStatsFactory, clock, limits)
+                            .run(&mut port, &mut buffers)
+                    }
+                };
             })
             .expect("spawning the in-process firmware");
         InProc {

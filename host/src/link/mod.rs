@@ -49,6 +49,16 @@ impl std::str::FromStr for LinkKind {
     }
 }
 
+/// What the firmware runs on each epoch.
+#[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FirmwareProcessor {
+    /// Reduced SIFT on both images.
+    #[default]
+    Sift,
+    /// Image statistics only (link bring-up).
+    Stats,
+}
+
 /// Link options of the rig emulation (flatten into a command with `#[command(flatten)]`).
 #[derive(clap::Args, Debug, Clone)]
 pub struct LinkOptions {
@@ -86,6 +96,9 @@ pub struct LinkOptions {
     /// Working memory of a firmware this link starts, bytes.
     #[arg(long, default_value_t = 32 << 20)]
     pub fw_memory: usize,
+    /// Per-epoch processing of a firmware this link starts.
+    #[arg(long, value_enum, default_value_t = FirmwareProcessor::Sift)]
+    pub fw_processor: FirmwareProcessor,
     /// Frame payload bytes per chunk packet.
     #[arg(long, default_value_t = 1024)]
     pub chunk: usize,
@@ -108,6 +121,7 @@ impl Default for LinkOptions {
             fault_reorder: 0.0,
             fault_seed: 1,
             fw_memory: 32 << 20,
+            fw_processor: FirmwareProcessor::Sift,
             chunk: 1024,
             link_timeout: 5.0,
         }
@@ -142,9 +156,17 @@ impl LinkOptions {
             }
         }
         let base: Box<dyn Transport> = match &self.link {
-            LinkKind::InProc => Box::new(inproc::InProc::spawn(self.fw_memory, Limits::default())),
-            LinkKind::Child => Box::new(child::ChildLink::spawn(self.fw_memory)?),
-            LinkKind::Tcp(None) => Box::new(net::TcpLink::spawn(self.fw_memory)?),
+            LinkKind::InProc => Box::new(inproc::InProc::spawn(
+                self.fw_memory,
+                Limits::default(),
+                self.fw_processor,
+            )),
+            LinkKind::Child => {
+                Box::new(child::ChildLink::spawn(self.fw_memory, self.fw_processor)?)
+            }
+            LinkKind::Tcp(None) => {
+                Box::new(net::TcpLink::spawn(self.fw_memory, self.fw_processor)?)
+            }
             LinkKind::Tcp(Some(addr)) => Box::new(net::TcpLink::connect(addr)?),
             LinkKind::Serial(dev) => Box::new(
                 net::SerialLink::open(dev, self.baud.unwrap_or(921_600)).context("serial link")?,

@@ -19,8 +19,8 @@ impl TcpLink {
     }
 
     /// Starts the firmware binary listening on 127.0.0.1 and connects to it.
-    pub fn spawn(memory: usize) -> anyhow::Result<Self> {
-        let (child, addr) = spawn_tcp_firmware(memory)?;
+    pub fn spawn(memory: usize, processor: super::FirmwareProcessor) -> anyhow::Result<Self> {
+        let (child, addr) = spawn_tcp_firmware(memory, processor)?;
         Self::connect_with(&addr, Some(child))
     }
 
