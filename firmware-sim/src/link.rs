@@ -229,8 +229,11 @@ impl<'b> Link<'b> {
     {
         loop {
             if self.pos == self.end {
-                // About to block: acknowledge what was delivered first.
-                if self.unacked > 0 {
+                // Probably about to block (the last read did not fill the buffer,
+                // so the port had no more): acknowledge what was delivered. After
+                // a full read more is likely waiting; acks then go every
+                // RX_WINDOW / 4 packets, so a burst costs few acks.
+                if self.unacked > 0 && self.end < self.read.len() {
                     Self::ack(&mut self.tx, &self.rx, &mut self.unacked, port)?;
                 }
                 let n = port.read(self.read)?;

@@ -92,10 +92,73 @@ fn raw_channel(epochs: u32, data: &[(Vec<u8>, Vec<u8>)]) -> f64 {
     t0.elapsed().as_secs_f64()
 }
 
+/// CPU cost of the protocol alone, one thread: encode every chunk of a frame,
+/// decode it and assemble the frame (no channel, no threads).
+fn codec_only(frames: u32, chunk: usize, data: &[(Vec<u8>, Vec<u8>)]) -> f64 {
+    use phototraverse_core::protocol::assembly::FrameAssembler;
+    use phototraverse_core::protocol::messages::{
+        Camera, FrameBegin, FrameChunk, FrameEnd, Message,
+    };
+    use phototraverse_core::protocol::{Decoder, Header, PacketBuffers, MAX_ENCODED};
+    let mut bufs = Box::<PacketBuffers>::default();
+    let mut dec = Decoder::new(vec![0u8; MAX_ENCODED]);
+    let mut frame = vec![0u8; W as usize * H as usize];
+    let mut asm = FrameAssembler::new(&mut frame, W, H);
+    let t0 = Instant::now();
+    for k in 0..frames {
+        let img = &data[k as usize % data.len()].0;
+        let begin = FrameBegin {
+            epoch: k,
+            camera: Camera::Left,
+            format: PixelFormat::Gray8,
+            width: W,
+            height: H,
+            timestamp_us: 0,
+        };
+        asm.begin(begin).unwrap();
+        for (i, part) in img.chunks(chunk).enumerate() {
+            let m = Message::FrameChunk(FrameChunk {
+                epoch: k,
+                camera: Camera::Left,
+                offset: (i * chunk) as u32,
+                data: part,
+            });
+            let wire = bufs
+                .encode(
+                    Header {
+                        message: m.message_type(),
+                        seq: i as u16,
+                    },
+                    |p| m.emit(p),
+                )
+                .unwrap();
+            let (_, ev) = dec.feed(wire);
+            let p = ev.unwrap().unwrap();
+            if let Message::FrameChunk(c) = Message::parse(p.type_byte(), p.payload()).unwrap() {
+                asm.chunk(&c).unwrap();
+            }
+        }
+        asm.end(&FrameEnd {
+            epoch: k,
+            camera: Camera::Left,
+            total_bytes: img.len() as u32,
+            crc32: crc32(img),
+        })
+        .unwrap();
+    }
+    frames as f64 * W as f64 * H as f64 / 1e6 / t0.elapsed().as_secs_f64()
+}
+
 fn main() {
     let quick = std::env::args().any(|a| a == "--quick");
     let data: Vec<_> = (0..4).map(frames).collect();
     let epoch_bytes = 2.0 * W as f64 * H as f64;
+    for chunk in [1024usize, 4087] {
+        println!(
+            "codec only (one thread, encode + decode + assemble), chunk {chunk}: {:.1} MB/s",
+            codec_only(if quick { 40 } else { 400 }, chunk, &data)
+        );
+    }
 
     let epochs = if quick { 20 } else { 200 };
     let mb = epochs as f64 * epoch_bytes / 1e6;

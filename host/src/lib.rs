@@ -2,5 +2,5 @@
 //! emulated rig link and the CLI's commands.
 pub mod commands;
 pub mod link;
-pub mod session;
 pub mod report;
+pub mod session;

@@ -326,7 +326,9 @@ impl<T: Transport> Session<T> {
     /// handed to the link (results arrive later; see [`Session::finish`]).
     pub fn send_epoch(&mut self, f: &EpochFrames) -> Result<(), SessionError> {
         if let Some(fps) = self.opts.fps.filter(|r| *r > 0.0) {
-            let due = self.started + Duration::from_secs_f64(self.sent_epochs.len() as f64 / fps);
+            // Epoch k leaves k frame intervals after the first one, like a camera's trigger.
+            let origin = self.sent_epochs.first().map_or_else(Instant::now, |e| e.1);
+            let due = origin + Duration::from_secs_f64(self.sent_epochs.len() as f64 / fps);
             while Instant::now() < due {
                 self.service(
                     due.saturating_duration_since(Instant::now())
@@ -472,10 +474,16 @@ impl<T: Transport> Session<T> {
                 self.capabilities
                     .map_or(usize::MAX, |c| c.rx_window.max(1) as usize),
             );
-            if self.window.len() < limit.min(self.cwnd as usize).max(1) {
+            let limit = limit.min(self.cwnd as usize).max(1);
+            if self.window.len() < limit {
                 break;
             }
-            self.service(self.rto / 4)?;
+            // Full: wait until a quarter of the window is free, so packets go in
+            // bursts rather than one per acknowledgement.
+            let resume = limit - limit / 4;
+            while self.window.len() >= resume.max(1) {
+                self.service(self.rto / 4)?;
+            }
         }
         let seq = self.next_seq;
         let wire = self

@@ -439,13 +439,39 @@ fn bad_input_is_refused_clearly_and_the_session_goes_on() {
     let text = wait_for_error(&mut s, ErrorCode::ChunkOutOfOrder);
     assert!(text.contains("offset 512, expected 0"), "{text}");
 
+    // A frame whose whole-frame CRC does not match: that epoch is lost.
+    let begin = FrameBegin {
+        epoch: 102,
+        ..begin
+    };
+    s.send_message(&Message::FrameBegin(begin)).unwrap();
+    for (k, part) in img.chunks(1024).enumerate() {
+        let offset = k as u32 * 1024;
+        let chunk = FrameChunk {
+            epoch: 102,
+            camera: Camera::Left,
+            offset,
+            data: part,
+        };
+        s.send_message(&Message::FrameChunk(chunk)).unwrap();
+    }
+    let bad = FrameEnd {
+        epoch: 102,
+        camera: Camera::Left,
+        total_bytes: img.len() as u32,
+        crc32: !crc32(&img),
+    };
+    s.send_message(&Message::FrameEnd(bad)).unwrap();
+    let text = wait_for_error(&mut s, ErrorCode::FrameCrc);
+    assert!(text.contains("Crc"), "{text}");
+
     // The session goes on: good epochs still give results.
     send_epochs(&mut s, 0..3, W, H);
     s.finish().unwrap();
     check_results(&s, 0..3, W, H);
     assert_eq!(s.result(100).unwrap().status, status::LOST);
     assert_eq!(s.result(101).unwrap().status, status::LOST);
-    assert_eq!(s.lost_epochs(), vec![100, 101]);
+    assert_eq!(s.lost_epochs(), vec![100, 101, 102]);
 }
 
 /// A link whose firmware never answers.
@@ -481,5 +507,75 @@ fn an_unresponsive_firmware_times_out_with_a_clear_message() {
             && text.contains("a silent link")
             && text.contains("capabilities"),
         "{text}"
+    );
+}
+
+#[test]
+fn sixteen_bit_frames_are_scaled_on_arrival() {
+    let mut s = Session::open(inproc_stats(), SessionOptions::default()).unwrap();
+    let mut cfg = config(W, H);
+    cfg.pipeline.pixel_bytes = 2;
+    let acc = s.configure(&cfg).unwrap();
+    assert_eq!(acc.frame_bytes, 4 * W as u32 * H as u32);
+    // 12-bit pixels: the firmware keeps the top 8 bits.
+    let to16 = |img: &[u8]| -> Vec<u8> {
+        img.iter()
+            .flat_map(|&v| ((v as u16) << 4 | 0xF).to_le_bytes())
+            .collect()
+    };
+    let (l8, r8) = (image(3, 0, W, H), image(3, 1, W, H));
+    let (l16, r16) = (to16(&l8), to16(&r8));
+    let f = EpochFrames {
+        epoch: 3,
+        timestamp_us: 0,
+        width: W,
+        height: H,
+        format: PixelFormat::Gray16 { bits: 12 },
+        left: &l16,
+        right: &r16,
+        aux: None,
+    };
+    s.send_epoch(&f).unwrap();
+    s.finish().unwrap();
+    check_results(&s, 3..4, W, H);
+}
+
+#[test]
+fn pacing_and_the_bandwidth_limit_hold() {
+    use phototraverse_host::link::throttle::Throttled;
+    use phototraverse_host::session::epoch_wire_bytes;
+    let (w, h) = (64u16, 48u16);
+    // Pacing: 4 epochs at 20 fps cannot take less than 3 frame intervals.
+    let opts = SessionOptions {
+        fps: Some(20.0),
+        ..Default::default()
+    };
+    let mut s = Session::open(inproc_stats(), opts).unwrap();
+    s.configure(&config(w, h)).unwrap();
+    let t0 = std::time::Instant::now();
+    send_epochs(&mut s, 0..4, w, h);
+    s.finish().unwrap();
+    assert!(
+        t0.elapsed() >= Duration::from_millis(150),
+        "{:?}",
+        t0.elapsed()
+    );
+
+    // 230400 baud: an epoch takes what its bytes need on the wire, not much more.
+    let baud = 230_400;
+    let mut s = Session::open(
+        Throttled::new(inproc_stats(), baud),
+        SessionOptions::default(),
+    )
+    .unwrap();
+    s.configure(&config(w, h)).unwrap();
+    let t0 = std::time::Instant::now();
+    send_epochs(&mut s, 0..1, w, h);
+    s.finish().unwrap();
+    let measured = t0.elapsed().as_secs_f64();
+    let computed = epoch_wire_bytes(w as usize * h as usize, 1024) as f64 * 10.0 / baud as f64;
+    assert!(
+        measured > 0.9 * computed && measured < 1.5 * computed + 0.05,
+        "measured {measured} s, computed {computed} s"
     );
 }

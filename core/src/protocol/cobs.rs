@@ -20,29 +20,27 @@ pub fn encode(src: &[u8], dst: &mut [u8]) -> Result<usize, BufferTooSmall> {
     if dst.len() < max_encoded_len(src.len()) {
         return Err(BufferTooSmall);
     }
-    let mut code_at = 0;
-    let mut out = 1;
-    let mut code: u8 = 1;
-    for &b in src {
-        if b == 0 {
-            dst[code_at] = code;
-            code_at = out;
-            out += 1;
-            code = 1;
+    // Block by block: each is a code byte and up to 254 non-zero data bytes,
+    // found with a vectorised search and moved with one copy.
+    let mut out = 0;
+    let mut rest = src;
+    loop {
+        let window = &rest[..rest.len().min(254)];
+        let (n, zero) = match memchr::memchr(0, window) {
+            Some(i) => (i, true),
+            None => (window.len(), false),
+        };
+        dst[out] = n as u8 + 1;
+        dst[out + 1..out + 1 + n].copy_from_slice(&rest[..n]);
+        out += n + 1;
+        if zero {
+            rest = &rest[n + 1..];
+        } else if n == 254 {
+            rest = &rest[n..];
         } else {
-            dst[out] = b;
-            out += 1;
-            code += 1;
-            if code == 0xFF {
-                dst[code_at] = code;
-                code_at = out;
-                out += 1;
-                code = 1;
-            }
+            return Ok(out);
         }
     }
-    dst[code_at] = code;
-    Ok(out)
 }
 
 /// Decodes `buf[..len]` in place (the output never overtakes the input);
@@ -56,17 +54,14 @@ pub fn decode_in_place(buf: &mut [u8]) -> Result<usize, CobsError> {
         if code == 0 || read + code > len {
             return Err(CobsError);
         }
-        read += 1;
-        // Data bytes of this block: copy forward (write <= read always holds).
-        for _ in 1..code {
-            let b = buf[read];
-            if b == 0 {
-                return Err(CobsError);
-            }
-            buf[write] = b;
-            write += 1;
-            read += 1;
+        let data = read + 1..read + code;
+        if memchr::memchr(0, &buf[data.clone()]).is_some() {
+            return Err(CobsError);
         }
+        // The output never overtakes the input (write <= read).
+        buf.copy_within(data, write);
+        write += code - 1;
+        read += code;
         // A block shorter than 254 data bytes stands for a zero, except at the end.
         if code != 0xFF && read < len {
             buf[write] = 0;

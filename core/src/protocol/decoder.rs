@@ -67,7 +67,7 @@ impl<B: AsMut<[u8]>> Decoder<B> {
     /// returns how many were consumed and, if a delimiter closed a non-empty
     /// run, the packet or why it was dropped. Call again with the rest.
     pub fn feed<'s>(&'s mut self, input: &[u8]) -> Feed<'s> {
-        let delim = input.iter().position(|&b| b == 0);
+        let delim = memchr::memchr(0, input);
         let data = &input[..delim.unwrap_or(input.len())];
         let buf = self.buf.as_mut();
         let room = buf.len() - self.len;

@@ -184,3 +184,62 @@ impl LinkOptions {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn link_kinds_parse() {
+        assert_eq!("inproc".parse::<LinkKind>(), Ok(LinkKind::InProc));
+        assert_eq!("child".parse::<LinkKind>(), Ok(LinkKind::Child));
+        assert_eq!("tcp".parse::<LinkKind>(), Ok(LinkKind::Tcp(None)));
+        assert_eq!(
+            "tcp:127.0.0.1:7000".parse::<LinkKind>(),
+            Ok(LinkKind::Tcp(Some("127.0.0.1:7000".into())))
+        );
+        assert_eq!(
+            "serial:/dev/ttyUSB0".parse::<LinkKind>(),
+            Ok(LinkKind::Serial("/dev/ttyUSB0".into()))
+        );
+        assert!("udp"
+            .parse::<LinkKind>()
+            .unwrap_err()
+            .contains("unknown link"));
+    }
+
+    #[test]
+    fn options_flatten_into_a_command() {
+        use clap::Parser;
+        #[derive(Parser)]
+        struct Cmd {
+            #[command(flatten)]
+            link: LinkOptions,
+        }
+        let c = Cmd::parse_from([
+            "x",
+            "--link",
+            "tcp:1.2.3.4:5",
+            "--baud",
+            "921600",
+            "--fault-ber",
+            "1e-4",
+            "--fault-seed",
+            "3",
+        ]);
+        assert_eq!(c.link.link, LinkKind::Tcp(Some("1.2.3.4:5".into())));
+        assert_eq!(c.link.baud, Some(921_600));
+        assert_eq!(c.link.faults().ber, 1e-4);
+        assert_eq!(c.link.faults().seed, 3);
+        let bad = LinkOptions {
+            fault_drop: 1.5,
+            ..LinkOptions::default()
+        };
+        assert!(bad
+            .open()
+            .err()
+            .unwrap()
+            .to_string()
+            .contains("--fault-drop"));
+    }
+}
