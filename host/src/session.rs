@@ -210,6 +210,8 @@ pub struct Session<T: Transport> {
     last_heard: Instant,
     started: Instant,
     rto: Duration,
+    /// Current retransmission time-out: `rto`, doubled on each time-out.
+    backoff: Duration,
     /// Congestion window (packets): halved on every loss, grown by one per
     /// window of acknowledgements, so a noisy link wastes less on go-back-N.
     cwnd: f64,
@@ -249,6 +251,7 @@ impl<T: Transport> Session<T> {
             last_heard: now,
             started: now,
             rto,
+            backoff: rto,
             cwnd: opts.window as f64,
             capabilities: None,
             accepted: None,
@@ -528,9 +531,15 @@ impl<T: Transport> Session<T> {
                 })
             }
         }
-        if !self.window.is_empty() && self.last_progress.elapsed() > self.rto {
+        if !self.window.is_empty() && self.last_progress.elapsed() > self.backoff {
             self.link.retransmission_timeouts += 1;
             self.cwnd = (self.cwnd / 2.0).max(2.0);
+            // Exponential back-off: a firmware busy with an epoch is not a lossy
+            // link; progress resets it.
+            self.backoff = (self.backoff * 2).min(self.rto * 16);
+            // Our acknowledgement may be what was lost: a firmware whose window is
+            // full of unacknowledged answers takes nothing new until it gets one.
+            self.send_ack()?;
             let from = self.window.front().map(|w| w.0).unwrap_or(self.next_seq);
             self.retransmit_from(from)?;
             self.last_progress = Instant::now();
@@ -553,10 +562,11 @@ impl<T: Transport> Session<T> {
                     what: what.to_string(),
                 });
             }
-            if silent > self.rto && last_nudge.elapsed() > self.rto {
+            if silent > self.backoff && last_nudge.elapsed() > self.backoff {
                 // Our window may be fine while an answer of the firmware was lost:
                 // ask it to resend from what we expect.
                 last_nudge = Instant::now();
+                self.backoff = (self.backoff * 2).min(self.rto * 16);
                 self.send_control(&Message::Nack(Nack {
                     expected: self.rx.expected(),
                     reason: nack_reason::TIMEOUT,
@@ -631,6 +641,7 @@ impl<T: Transport> Session<T> {
         if d > 0 && d as usize <= self.window.len() {
             self.window.drain(..d as usize);
             self.last_progress = Instant::now();
+            self.backoff = self.rto;
             self.cwnd = (self.cwnd + d as f64 / self.cwnd).min(self.opts.window as f64);
         }
     }
@@ -661,14 +672,18 @@ impl<T: Transport> Session<T> {
             self.handle(ev)?;
         }
         if self.delivered_unacked > 0 {
-            self.delivered_unacked = 0;
-            let ack = Ack {
-                next_expected: self.rx.expected(),
-                window: 64,
-            };
-            self.send_control(&Message::Ack(ack))?;
+            self.send_ack()?;
         }
         Ok(())
+    }
+
+    fn send_ack(&mut self) -> Result<(), SessionError> {
+        self.delivered_unacked = 0;
+        let ack = Ack {
+            next_expected: self.rx.expected(),
+            window: 64,
+        };
+        self.send_control(&Message::Ack(ack))
     }
 
     fn handle(&mut self, ev: Event) -> Result<(), SessionError> {
