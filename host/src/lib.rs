@@ -4,6 +4,8 @@ pub mod block;
 pub mod commands;
 pub mod dataset;
 pub mod eval;
+pub mod link;
 pub mod poses;
 pub mod report;
+pub mod session;
 pub mod synth;

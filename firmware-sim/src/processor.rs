@@ -1,0 +1,270 @@
+//! Per-epoch processing behind a small trait, so the traverse plugs in without
+//! touching the protocol loop. The firmware builds one processor per
+//! configuration from its arena and calls it on every complete stereo epoch.
+use phototraverse_core::budget::{Arena, ComponentKind, MemoryBudget, OutOfMemory};
+use phototraverse_core::features::FeatureSet;
+use phototraverse_core::image::ImageView;
+use phototraverse_core::protocol::messages::{
+    processor_kind, stage, status, Aux, Configure, EpochResult,
+};
+use phototraverse_core::sift::{Sift, SiftConfig, SiftError};
+
+/// A monotonic microsecond clock (the board's timer; `std::time::Instant` on the host).
+pub trait Clock {
+    fn now_us(&self) -> u64;
+}
+
+/// A clock that always reads zero (timings reported as 0).
+pub struct NoClock;
+
+impl Clock for NoClock {
+    fn now_us(&self) -> u64 {
+        0
+    }
+}
+
+/// One complete stereo epoch.
+pub struct EpochInput<'i> {
+    pub epoch: u32,
+    pub left: ImageView<'i>,
+    pub right: ImageView<'i>,
+    pub timestamps_us: [u64; 2],
+    /// Auxiliary observations sent for this epoch, if any.
+    pub aux: Option<Aux>,
+}
+
+/// What a processor answers for an epoch.
+pub struct EpochOutput {
+    pub result: EpochResult,
+    /// Microseconds per [`stage`] (the firmware fills `ASSEMBLE` and `TOTAL`).
+    pub timings_us: [u32; stage::COUNT],
+}
+
+/// The per-epoch work.
+pub trait EpochProcessor {
+    fn process(&mut self, input: &EpochInput, clock: &dyn Clock) -> EpochOutput;
+}
+
+/// Why a processor could not be built for a configuration.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BuildError {
+    OutOfMemory(OutOfMemory),
+    /// A configuration value the processor cannot use (named).
+    Invalid(&'static str),
+}
+
+impl From<OutOfMemory> for BuildError {
+    fn from(e: OutOfMemory) -> Self {
+        BuildError::OutOfMemory(e)
+    }
+}
+
+/// Builds processors: predicts their memory, then carves it from the arena.
+pub trait ProcessorFactory {
+    type Processor<'a>: EpochProcessor;
+    /// [`processor_kind`] reported in the capabilities.
+    const KIND: u8;
+    /// Adds the processor's components for `config` to `budget`.
+    fn budget(&self, config: &Configure, budget: &mut MemoryBudget) -> Result<(), BuildError>;
+    fn build<'a>(
+        &mut self,
+        config: &Configure,
+        arena: &mut Arena<'a>,
+    ) -> Result<Self::Processor<'a>, BuildError>;
+}
+
+/// The feature processor: reduced SIFT on both images of every epoch, the
+/// configured capacities from the pipeline fields.
+pub struct SiftFactory;
+
+/// SIFT parameters from the protocol's pipeline fields (0 keeps SIFT's default).
+pub fn sift_config(config: &Configure) -> SiftConfig {
+    let p = &config.pipeline;
+    let d = SiftConfig::default();
+    let or = |v: usize, dflt: usize| if v == 0 { dflt } else { v };
+    let orf = |v: f32, dflt: f32| if v > 0.0 && v.is_finite() { v } else { dflt };
+    SiftConfig {
+        max_width: p.max_width as usize,
+        max_height: p.max_height as usize,
+        octaves: or(p.octaves as usize, d.octaves),
+        levels: or(p.scales_per_octave as usize, d.levels),
+        contrast_threshold: orf(p.contrast_threshold, d.contrast_threshold),
+        edge_threshold: orf(p.edge_ratio, d.edge_threshold),
+        max_keypoints: or(p.keypoints_per_image as usize, d.max_keypoints),
+        ..d
+    }
+}
+
+fn sift_error(e: SiftError) -> BuildError {
+    match e {
+        SiftError::OutOfMemory(m) => BuildError::OutOfMemory(m),
+        SiftError::BadConfig(field) => BuildError::Invalid(field),
+        SiftError::Image(_) => BuildError::Invalid("image capacity"),
+    }
+}
+
+pub struct SiftProcessor<'a> {
+    sift: Sift<'a>,
+    features: [FeatureSet<'a>; 2],
+}
+
+impl SiftProcessor<'_> {
+    /// Features of the last epoch: left, right.
+    pub fn features(&self) -> &[FeatureSet<'_>; 2] {
+        &self.features
+    }
+}
+
+impl ProcessorFactory for SiftFactory {
+    type Processor<'a> = SiftProcessor<'a>;
+    const KIND: u8 = processor_kind::SIFT;
+
+    fn budget(&self, config: &Configure, budget: &mut MemoryBudget) -> Result<(), BuildError> {
+        let cfg = sift_config(config);
+        cfg.budget(budget).map_err(sift_error)?;
+        FeatureSet::budget(
+            cfg.max_keypoints,
+            budget,
+            "sift.keypoints_left",
+            "sift.descriptors_left",
+        );
+        FeatureSet::budget(
+            cfg.max_keypoints,
+            budget,
+            "sift.keypoints_right",
+            "sift.descriptors_right",
+        );
+        Ok(())
+    }
+
+    fn build<'a>(
+        &mut self,
+        config: &Configure,
+        arena: &mut Arena<'a>,
+    ) -> Result<SiftProcessor<'a>, BuildError> {
+        let cfg = sift_config(config);
+        let sift = Sift::new(cfg, arena).map_err(sift_error)?;
+        let left = FeatureSet::new(arena, cfg.max_keypoints)?;
+        let right = FeatureSet::new(arena, cfg.max_keypoints)?;
+        Ok(SiftProcessor {
+            sift,
+            features: [left, right],
+        })
+    }
+}
+
+impl EpochProcessor for SiftProcessor<'_> {
+    fn process(&mut self, input: &EpochInput, clock: &dyn Clock) -> EpochOutput {
+        let mut timings_us = [0u32; stage::COUNT];
+        let mut result = EpochResult::empty(input.epoch, status::FEATURES_ONLY);
+        let [fl, fr] = &mut self.features;
+        for (k, (image, set, st)) in [
+            (&input.left, fl, stage::SIFT_LEFT),
+            (&input.right, fr, stage::SIFT_RIGHT),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let t0 = clock.now_us();
+            match self.sift.extract(image, set) {
+                Ok(stats) => {
+                    result.counts.keypoints[k] = set.len() as u32;
+                    result.counts.dropped += (stats.dropped + stats.pending_dropped) as u32;
+                    result.extra[2 * k] = stats.extrema as f64;
+                    result.extra[2 * k + 1] = stats.refined as f64;
+                }
+                Err(_) => result.status = status::FAILED,
+            }
+            timings_us[st] = clock.now_us().saturating_sub(t0) as u32;
+        }
+        EpochOutput { result, timings_us }
+    }
+}
+
+/// Bring-up processor: real image statistics of both images (mean, median,
+/// gradient energy), no features. Used until a feature processor is wired.
+pub struct ImageStatsFactory;
+
+pub struct ImageStats<'a> {
+    histogram: &'a mut [u32],
+}
+
+impl ProcessorFactory for ImageStatsFactory {
+    type Processor<'a> = ImageStats<'a>;
+    const KIND: u8 = processor_kind::IMAGE_STATS;
+
+    fn budget(&self, _config: &Configure, budget: &mut MemoryBudget) -> Result<(), BuildError> {
+        budget.add(
+            "stats.histogram",
+            ComponentKind::Working,
+            phototraverse_core::budget::slice_bytes::<u32>(256),
+        );
+        Ok(())
+    }
+
+    fn build<'a>(
+        &mut self,
+        _config: &Configure,
+        arena: &mut Arena<'a>,
+    ) -> Result<ImageStats<'a>, BuildError> {
+        Ok(ImageStats {
+            histogram: arena.alloc_slice::<u32>(256)?,
+        })
+    }
+}
+
+impl ImageStats<'_> {
+    /// Mean, median and mean absolute gradient (|dx| + |dy|) of one image.
+    fn measure(&mut self, img: &ImageView) -> [f64; 3] {
+        self.histogram.fill(0);
+        let (w, h) = (img.width(), img.height());
+        let (mut sum, mut grad) = (0u64, 0u64);
+        for r in 0..h {
+            let row = img.row(r);
+            let below = if r + 1 < h {
+                Some(img.row(r + 1))
+            } else {
+                None
+            };
+            for c in 0..w {
+                let v = row[c];
+                self.histogram[v as usize] += 1;
+                sum += v as u64;
+                if c + 1 < w {
+                    grad += (row[c + 1] as i32 - v as i32).unsigned_abs() as u64;
+                }
+                if let Some(b) = below {
+                    grad += (b[c] as i32 - v as i32).unsigned_abs() as u64;
+                }
+            }
+        }
+        let n = (w * h).max(1) as u64;
+        let mut acc = 0u64;
+        let mut median = 0;
+        for (v, &k) in self.histogram.iter().enumerate() {
+            acc += k as u64;
+            if 2 * acc >= n {
+                median = v;
+                break;
+            }
+        }
+        [sum as f64 / n as f64, median as f64, grad as f64 / n as f64]
+    }
+}
+
+impl EpochProcessor for ImageStats<'_> {
+    fn process(&mut self, input: &EpochInput, clock: &dyn Clock) -> EpochOutput {
+        let mut timings_us = [0u32; stage::COUNT];
+        let t0 = clock.now_us();
+        let l = self.measure(&input.left);
+        let t1 = clock.now_us();
+        let r = self.measure(&input.right);
+        let t2 = clock.now_us();
+        timings_us[stage::SIFT_LEFT] = (t1 - t0) as u32;
+        timings_us[stage::SIFT_RIGHT] = (t2 - t1) as u32;
+        let mut result = EpochResult::empty(input.epoch, status::STATS_ONLY);
+        result.extra = [l[0], l[2], r[0], r[2]];
+        result.sigma0 = (l[1] - r[1]).abs();
+        EpochOutput { result, timings_us }
+    }
+}
