@@ -395,7 +395,7 @@ pub struct Projection {
 /// with focal length `focal_mm`.
 pub fn project(pose: &Pose, focal_mm: f64, point: &[f64; 3]) -> Result<[f64; 2], CameraError> {
     let uvw = pose.to_camera(point);
-    if !(uvw[2] < -MIN_DEPTH) {
+    if uvw[2].is_nan() || uvw[2] >= -MIN_DEPTH {
         return Err(CameraError::BehindCamera);
     }
     Ok([-focal_mm * uvw[0] / uvw[2], -focal_mm * uvw[1] / uvw[2]])
@@ -412,7 +412,7 @@ pub fn project_with_jacobians(
     let d = Vector3::from(*point) - pose.centre_vec();
     let uvw = m * d;
     let (u, v, w) = (uvw[0], uvw[1], uvw[2]);
-    if !(w < -MIN_DEPTH) {
+    if w.is_nan() || w >= -MIN_DEPTH {
         return Err(CameraError::BehindCamera);
     }
     let f = focal_mm;

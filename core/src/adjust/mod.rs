@@ -1,1 +1,52 @@
 //! Intersection, resection and incremental bundle adjustment (issue 5).
+//!
+//! Scalar type: `f64` throughout. The reduced camera system of a window of 8
+//! epochs is at most 54x54 and a Cortex-M7 has a double-precision FPU; in
+//! `f32` the normal equations of a 20 m window lose about 7 of their 7
+//! significant digits (condition numbers of 1e6..1e8 are usual), so `f32`
+//! would cost the millimetre level (see docs/adjustment.md).
+//!
+//! Coordinates inside a [`Window`] are relative to a local origin (the first
+//! epoch's left centre when the window is created) so sums of squares never
+//! mix kilometres with millimetres.
+//!
+//! - [`geometry`]: collinearity of the left and right cameras of the rig with
+//!   analytic Jacobians (chain rule through the relative orientation).
+//! - [`intersection`]: linear intersection of two or more rays (seed 000, §5.4).
+//! - [`resection`]: P3P (Grunert) in a deterministic RANSAC, then least squares.
+//! - [`cholesky`]: in-place Cholesky factorisation, solve and inverse.
+//! - [`constraints`]: datum/prior, base length, relative orientation prior,
+//!   motion smoothness, odometer distance, GNSS position.
+//! - [`weighting`]: seed 000 weighting schemes and the robust re-weighting.
+//! - [`quality`]: sigma0, chi-square quantiles and the global test.
+//! - [`window`]: the sliding-window adjuster (storage from the arena, normal
+//!   equations with the Schur complement, Levenberg-Marquardt).
+
+// `!(x > 0.0)` is deliberate throughout: it is also true for NaN, so invalid
+// input is refused instead of slipping through a `x <= 0.0` test. Index loops
+// mirror the matrix formulas they implement.
+#![allow(
+    clippy::neg_cmp_op_on_partial_ord,
+    clippy::nonminimal_bool,
+    clippy::needless_range_loop,
+    clippy::type_complexity
+)]
+
+pub mod cholesky;
+pub mod constraints;
+pub mod geometry;
+pub mod intersection;
+pub mod quality;
+pub mod resection;
+pub mod weighting;
+pub mod window;
+
+#[cfg(test)]
+mod tests;
+
+pub use geometry::{Camera, RigParams};
+pub use intersection::{intersect, IntersectError, Intersection, Ray};
+pub use resection::{resect, Correspondence, ResectionConfig, ResectionError, ResectionResult};
+pub use window::{
+    AdjustConfig, AdjustError, ConstraintSigmas, Observation, Report, Robust, Window,
+};

@@ -1,0 +1,170 @@
+//! Collinearity for the two cameras of the rig, with the Jacobians the
+//! adjustment needs.
+//!
+//! The unknowns of an epoch are the left camera's `(omega, phi, kappa, X, Y, Z)`.
+//! The right camera follows through the rig: `M_R = Mrel M_L`,
+//! `C_R = C_L + M_L^T b`, so in the right camera frame
+//! `q_R = M_R (P - C_R) = Mrel (M_L (P - C_L) - b) = Mrel (q_L - b)`.
+//! Chain rule (q = q_L):
+//! - `dq_R/d(angle_L) = Mrel dM_L (P - C_L)`, `dq_R/dC_L = -Mrel M_L`, `dq_R/dP = Mrel M_L`,
+//! - `dq_R/d(rel angle) = dMrel (q - b)`, `dq_R/db = -Mrel`.
+//!
+//! Then `xc = -f u/w`, `yc = -f v/w` as in [`crate::camera`].
+
+use crate::camera::{rotation_with_derivatives, CameraError, Pose, Rig, MIN_DEPTH};
+use nalgebra::{Matrix3, Vector3};
+
+/// Which camera of the rig took an image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Camera {
+    Left = 0,
+    Right = 1,
+}
+
+impl Camera {
+    pub fn from_index(i: u8) -> Option<Camera> {
+        match i {
+            0 => Some(Camera::Left),
+            1 => Some(Camera::Right),
+            _ => None,
+        }
+    }
+}
+
+/// The relative orientation as adjustable parameters: `[w, p, k (rad), bx, by, bz (m)]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RigParams {
+    pub angles: [f64; 3],
+    pub base: [f64; 3],
+}
+
+impl RigParams {
+    pub fn from_rig(rig: &Rig) -> Self {
+        RigParams {
+            angles: rig.relative_angles,
+            base: rig.base_m,
+        }
+    }
+
+    pub fn to_array(&self) -> [f64; 6] {
+        let [a, b, c] = self.angles;
+        let [x, y, z] = self.base;
+        [a, b, c, x, y, z]
+    }
+
+    pub fn from_array(p: &[f64; 6]) -> Self {
+        RigParams {
+            angles: [p[0], p[1], p[2]],
+            base: [p[3], p[4], p[5]],
+        }
+    }
+
+    /// Length of the base vector, metres.
+    pub fn base_length(&self) -> f64 {
+        Vector3::from(self.base).norm()
+    }
+}
+
+/// A projection through the rig with all its partial derivatives.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RigProjection {
+    /// Corrected photo-coordinates, mm.
+    pub xy: [f64; 2],
+    /// `d(xc, yc)/d(left omega, phi, kappa, X, Y, Z)`.
+    pub d_pose: [[f64; 6]; 2],
+    /// `d(xc, yc)/d(rel omega, phi, kappa, bx, by, bz)`; zero for the left camera.
+    pub d_rig: [[f64; 6]; 2],
+    /// `d(xc, yc)/d(X, Y, Z)` of the point.
+    pub d_point: [[f64; 3]; 2],
+}
+
+/// Projects `point` into `camera` of the rig whose left camera is at `left`.
+pub fn project_rig(
+    left: &Pose,
+    rig: &RigParams,
+    camera: Camera,
+    focal_mm: f64,
+    point: &[f64; 3],
+) -> Result<RigProjection, CameraError> {
+    let (ml, dml) = rotation_with_derivatives(left.omega, left.phi, left.kappa);
+    let d = Vector3::from(*point) - left.centre_vec();
+    let q = ml * d;
+    // Camera-frame point, its derivatives w.r.t. pose angles, centre/point (3x3), rig.
+    let (qc, dq_ang, dq_point, dq_rig): (
+        Vector3<f64>,
+        [Vector3<f64>; 3],
+        Matrix3<f64>,
+        [Vector3<f64>; 6],
+    ) = match camera {
+        Camera::Left => (
+            q,
+            [dml[0] * d, dml[1] * d, dml[2] * d],
+            ml,
+            [Vector3::zeros(); 6],
+        ),
+        Camera::Right => {
+            let [rw, rp, rk] = rig.angles;
+            let (mr, dmr) = rotation_with_derivatives(rw, rp, rk);
+            let qb = q - Vector3::from(rig.base);
+            (
+                mr * qb,
+                [mr * (dml[0] * d), mr * (dml[1] * d), mr * (dml[2] * d)],
+                mr * ml,
+                [
+                    dmr[0] * qb,
+                    dmr[1] * qb,
+                    dmr[2] * qb,
+                    -mr.column(0).into_owned(),
+                    -mr.column(1).into_owned(),
+                    -mr.column(2).into_owned(),
+                ],
+            )
+        }
+    };
+    let (u, v, w) = (qc[0], qc[1], qc[2]);
+    if !(w < -MIN_DEPTH) || !(u.is_finite() && v.is_finite()) {
+        return Err(CameraError::BehindCamera);
+    }
+    let f = focal_mm;
+    // d(xc) = (-f/w) du + (f u / w^2) dw, likewise yc with v.
+    let gx = Vector3::new(-f / w, 0.0, f * u / (w * w));
+    let gy = Vector3::new(0.0, -f / w, f * v / (w * w));
+    let mut out = RigProjection {
+        xy: [-f * u / w, -f * v / w],
+        d_pose: [[0.0; 6]; 2],
+        d_rig: [[0.0; 6]; 2],
+        d_point: [[0.0; 3]; 2],
+    };
+    for a in 0..3 {
+        out.d_pose[0][a] = gx.dot(&dq_ang[a]);
+        out.d_pose[1][a] = gy.dot(&dq_ang[a]);
+        let col = dq_point.column(a).into_owned();
+        out.d_point[0][a] = gx.dot(&col);
+        out.d_point[1][a] = gy.dot(&col);
+        out.d_pose[0][3 + a] = -out.d_point[0][a];
+        out.d_pose[1][3 + a] = -out.d_point[1][a];
+    }
+    if camera == Camera::Right {
+        for (j, dq) in dq_rig.iter().enumerate() {
+            out.d_rig[0][j] = gx.dot(dq);
+            out.d_rig[1][j] = gy.dot(dq);
+        }
+    }
+    Ok(out)
+}
+
+/// Pose of `camera` given the left pose and the rig.
+pub fn camera_pose(left: &Pose, rig: &RigParams, camera: Camera) -> Pose {
+    match camera {
+        Camera::Left => *left,
+        Camera::Right => {
+            let r = Rig {
+                left: crate::camera::Interior::pinhole_px(1, 1, 1.0),
+                right: crate::camera::Interior::pinhole_px(1, 1, 1.0),
+                relative_angles: rig.angles,
+                base_m: rig.base,
+            };
+            r.right_pose(left)
+        }
+    }
+}

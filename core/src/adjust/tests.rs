@@ -1,0 +1,945 @@
+//! Adjustment tests: Jacobians against central differences, the seed's
+//! normal-case intersection, P3P/RANSAC, chi-square quantiles, and synthetic
+//! windows with known truth (clean, with blunders, degenerate).
+extern crate std;
+
+use super::constraints::{base_length, distance, prior_residual, smoothness, wrap_angle};
+use super::geometry::{project_rig, Camera, RigParams};
+use super::quality::{chi2_quantile, ChiSquareTest};
+use super::*;
+use crate::budget::{Arena, MemoryBudget};
+use crate::camera::{project, Interior, Pose, Rig};
+use std::vec;
+use std::vec::Vec;
+
+/// Deterministic uniform and normal numbers (no std RNG in the core).
+pub(crate) struct Rng(u64);
+impl Rng {
+    pub(crate) fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        lo + (hi - lo) * ((self.0 >> 11) as f64 / (1u64 << 53) as f64)
+    }
+    pub(crate) fn normal(&mut self) -> f64 {
+        let u1 = self.uniform(1e-12, 1.0);
+        let u2 = self.uniform(0.0, 1.0);
+        libm::sqrt(-2.0 * libm::log(u1)) * libm::cos(2.0 * core::f64::consts::PI * u2)
+    }
+}
+
+fn close(a: f64, b: f64, tol: f64) -> bool {
+    (a - b).abs() <= tol * (1.0 + a.abs().max(b.abs()))
+}
+
+// ---------- Jacobians ----------
+
+#[test]
+fn rig_projection_jacobians_match_central_differences() {
+    let mut rng = Rng(11);
+    for trial in 0..200 {
+        let left = Pose::from_params(&[
+            rng.uniform(1.3, 1.8),
+            rng.uniform(-0.2, 0.2),
+            rng.uniform(-0.3, 0.3),
+            rng.uniform(-1.0, 1.0),
+            rng.uniform(-1.0, 1.0),
+            rng.uniform(0.0, 2.0),
+        ]);
+        let rig = RigParams {
+            angles: [
+                rng.uniform(-0.05, 0.05),
+                rng.uniform(-0.05, 0.05),
+                rng.uniform(-0.05, 0.05),
+            ],
+            base: [
+                rng.uniform(0.3, 0.6),
+                rng.uniform(-0.02, 0.02),
+                rng.uniform(-0.02, 0.02),
+            ],
+        };
+        let cam = if trial % 2 == 0 {
+            Camera::Left
+        } else {
+            Camera::Right
+        };
+        let f = 8.0;
+        // A point in front of the left camera.
+        let m = left.rotation();
+        let q = nalgebra::Vector3::new(
+            rng.uniform(-3.0, 3.0),
+            rng.uniform(-2.0, 2.0),
+            -rng.uniform(5.0, 30.0),
+        );
+        let pw = left.centre_vec() + m.transpose() * q;
+        let point = [pw[0], pw[1], pw[2]];
+        let Ok(pr) = project_rig(&left, &rig, cam, f, &point) else {
+            continue;
+        };
+        let h = 1e-6;
+        let proj = |l: &Pose, r: &RigParams, p: &[f64; 3]| project_rig(l, r, cam, f, p).unwrap().xy;
+        for i in 0..6 {
+            let mut a = left.to_params();
+            let mut b = left.to_params();
+            a[i] += h;
+            b[i] -= h;
+            let (pa, pb) = (
+                proj(&Pose::from_params(&a), &rig, &point),
+                proj(&Pose::from_params(&b), &rig, &point),
+            );
+            for c in 0..2 {
+                let num = (pa[c] - pb[c]) / (2.0 * h);
+                assert!(
+                    close(num, pr.d_pose[c][i], 1e-6),
+                    "pose {i} coord {c}: {num} vs {}",
+                    pr.d_pose[c][i]
+                );
+            }
+            let mut ra = rig.to_array();
+            let mut rb = rig.to_array();
+            ra[i] += h;
+            rb[i] -= h;
+            let (pa, pb) = (
+                proj(&left, &RigParams::from_array(&ra), &point),
+                proj(&left, &RigParams::from_array(&rb), &point),
+            );
+            for c in 0..2 {
+                let num = (pa[c] - pb[c]) / (2.0 * h);
+                assert!(
+                    close(num, pr.d_rig[c][i], 1e-6),
+                    "rig {i} coord {c}: {num} vs {}",
+                    pr.d_rig[c][i]
+                );
+            }
+        }
+        for k in 0..3 {
+            let mut a = point;
+            let mut b = point;
+            a[k] += h;
+            b[k] -= h;
+            let (pa, pb) = (proj(&left, &rig, &a), proj(&left, &rig, &b));
+            for c in 0..2 {
+                let num = (pa[c] - pb[c]) / (2.0 * h);
+                assert!(close(num, pr.d_point[c][k], 1e-6));
+            }
+        }
+        // The right camera through the rig equals the explicit right pose.
+        if cam == Camera::Right {
+            let rp = geometry::camera_pose(&left, &rig, Camera::Right);
+            let direct = project(&rp, f, &point).unwrap();
+            assert!(close(direct[0], pr.xy[0], 1e-12) && close(direct[1], pr.xy[1], 1e-12));
+        }
+    }
+}
+
+#[test]
+fn constraint_jacobians_match_central_differences() {
+    let mut rng = Rng(5);
+    let h = 1e-7;
+    for _ in 0..50 {
+        let b = [
+            rng.uniform(-1.0, 1.0),
+            rng.uniform(-1.0, 1.0),
+            rng.uniform(-1.0, 1.0),
+        ];
+        let (_, g) = base_length(&b, 0.4);
+        let c0 = [
+            rng.uniform(-5.0, 5.0),
+            rng.uniform(-5.0, 5.0),
+            rng.uniform(-5.0, 5.0),
+        ];
+        let (_, gd) = distance(&c0, &b, 1.0);
+        for k in 0..3 {
+            let (mut bp, mut bm) = (b, b);
+            bp[k] += h;
+            bm[k] -= h;
+            let num = (base_length(&bp, 0.4).0 - base_length(&bm, 0.4).0) / (2.0 * h);
+            assert!(close(num, g[k], 1e-6));
+            let num = (distance(&c0, &bp, 1.0).0 - distance(&c0, &bm, 1.0).0) / (2.0 * h);
+            assert!(close(num, gd[k], 1e-6));
+            // With respect to c0 the gradient is the negative.
+            let (mut cp, mut cm) = (c0, c0);
+            cp[k] += h;
+            cm[k] -= h;
+            let num = (distance(&cp, &b, 1.0).0 - distance(&cm, &b, 1.0).0) / (2.0 * h);
+            assert!(close(num, -gd[k], 1e-6));
+        }
+        // Smoothness is linear: coefficients are its exact derivatives.
+        let cs = [c0, b, [1.0, 2.0, 3.0]];
+        let (r, k) = smoothness([&cs[0], &cs[1], &cs[2]], 0.5, 0.25);
+        for a in 0..3 {
+            assert!(close(
+                r[a],
+                k[0] * cs[0][a] + k[1] * cs[1][a] + k[2] * cs[2][a],
+                1e-12
+            ));
+        }
+        assert!(close(k[0] + k[1] + k[2], 0.0, 1e-12));
+    }
+    // Seed 000 App. B: dB/dX1 = (X1 - X2)/B.
+    let (e, g) = distance(&[0.0, 0.0, 0.0], &[0.3, 0.4, 0.0], 0.4);
+    assert!(close(e, 0.1, 1e-12) && close(g[0], 0.6, 1e-12) && close(g[1], 0.8, 1e-12));
+    assert!(close(
+        wrap_angle(2.0 * core::f64::consts::PI + 0.1),
+        0.1,
+        1e-12
+    ));
+    let r = prior_residual(
+        &[3.1, 0.0, 0.0, 1.0, 0.0, 0.0],
+        &[-3.1, 0.0, 0.0, 0.5, 0.0, 0.0],
+    );
+    assert!(close(r[0], 6.2 - 2.0 * core::f64::consts::PI, 1e-12) && close(r[3], 0.5, 1e-12));
+}
+
+// ---------- intersection ----------
+
+#[test]
+fn seed_normal_case_intersection() {
+    // Seed 000 §5.2: B = 0.40 m, f = 34.6041 mm, x' = 2 mm, x'' = 1 mm.
+    let f = 34.6041;
+    let left = Pose::from_degrees(90.0, 0.0, 0.0, [0.0, 0.0, 0.0]);
+    let right = Pose::from_degrees(90.0, 0.0, 0.0, [0.4, 0.0, 0.0]);
+    let rays = [
+        Ray {
+            pose: left,
+            focal_mm: f,
+            xy: [2.0, 0.0],
+        },
+        Ray {
+            pose: right,
+            focal_mm: f,
+            xy: [1.0, 0.0],
+        },
+    ];
+    let p = intersect(&rays, 1e-4).unwrap();
+    assert!((p.point[1] - 13.84164).abs() < 1e-6, "Y = {}", p.point[1]);
+    assert!((p.point[0] - 0.8).abs() < 1e-9);
+    assert!(p.point[2].abs() < 1e-9);
+}
+
+#[test]
+fn intersection_of_many_rays_is_exact_and_checks_geometry() {
+    let mut rng = Rng(3);
+    let f = 8.0;
+    let truth = [1.0, 12.0, 2.0];
+    let mut rays = Vec::new();
+    for k in 0..5 {
+        let pose = Pose::from_degrees(
+            90.0 + rng.uniform(-2.0, 2.0),
+            rng.uniform(-2.0, 2.0),
+            rng.uniform(-2.0, 2.0),
+            [0.3 * k as f64, 0.5 * k as f64, 1.0],
+        );
+        rays.push(Ray {
+            pose,
+            focal_mm: f,
+            xy: project(&pose, f, &truth).unwrap(),
+        });
+    }
+    let p = intersect(&rays, 1e-3).unwrap();
+    for a in 0..3 {
+        assert!((p.point[a] - truth[a]).abs() < 1e-9);
+    }
+    // Identical rays (zero base / point at infinity): refused.
+    let same = [rays[0], rays[0]];
+    assert_eq!(intersect(&same, 1e-3), Err(IntersectError::SmallRayAngle));
+    assert_eq!(intersect(&rays[..1], 1e-3), Err(IntersectError::TooFewRays));
+    let mut nan = rays.clone();
+    nan[1].xy[0] = f64::NAN;
+    assert_eq!(intersect(&nan, 1e-3), Err(IntersectError::NotFinite));
+    // Rays that meet behind the cameras.
+    let l = Pose::from_degrees(90.0, 0.0, 0.0, [0.0, 0.0, 0.0]);
+    let r = Pose::from_degrees(90.0, 0.0, 0.0, [0.4, 0.0, 0.0]);
+    let behind = [
+        Ray {
+            pose: l,
+            focal_mm: f,
+            xy: [-1.0, 0.0],
+        },
+        Ray {
+            pose: r,
+            focal_mm: f,
+            xy: [1.0, 0.0],
+        },
+    ];
+    assert_eq!(intersect(&behind, 1e-4), Err(IntersectError::BehindCamera));
+}
+
+// ---------- Cholesky and chi-square ----------
+
+#[test]
+fn cholesky_solves_and_inverts() {
+    let mut rng = Rng(9);
+    let n = 12;
+    type M = nalgebra::SMatrix<f64, 12, 12>;
+    let b = M::from_fn(|_, _| rng.uniform(-1.0, 1.0));
+    let a = b * b.transpose() + M::identity() * 0.5;
+    let mut m: Vec<f64> = (0..n * n).map(|k| a[(k / n, k % n)]).collect();
+    cholesky::factor(&mut m, n, cholesky::PIVOT_REL_TOL).unwrap();
+    let rhs: Vec<f64> = (0..n).map(|i| i as f64 - 3.0).collect();
+    let mut x = rhs.clone();
+    cholesky::solve(&m, n, &mut x);
+    let ax = a * nalgebra::SVector::<f64, 12>::from_column_slice(&x);
+    for i in 0..n {
+        assert!((ax[i] - rhs[i]).abs() < 1e-10);
+    }
+    cholesky::invert_in_place(&mut m, n);
+    let inv = M::from_row_slice(&m);
+    let id = a * inv;
+    for i in 0..n {
+        for j in 0..n {
+            assert!((id[(i, j)] - if i == j { 1.0 } else { 0.0 }).abs() < 1e-9);
+        }
+    }
+    // Singular (rank-deficient) matrix refused.
+    let mut s = vec![1.0, 1.0, 1.0, 1.0];
+    assert!(cholesky::factor(&mut s, 2, cholesky::PIVOT_REL_TOL).is_err());
+    let mut nan = vec![f64::NAN, 0.0, 0.0, 1.0];
+    assert!(cholesky::factor(&mut nan, 2, cholesky::PIVOT_REL_TOL).is_err());
+}
+
+#[test]
+fn chi_square_quantiles_match_tables() {
+    for (q, dof, expected) in [
+        (0.95, 1.0, 3.841459),
+        (0.975, 10.0, 20.483177),
+        (0.025, 10.0, 3.246973),
+        (0.999, 2.0, 13.815511),
+        (0.975, 1000.0, 1089.531),
+        (0.025, 1000.0, 914.2572),
+    ] {
+        let got = chi2_quantile(q, dof);
+        assert!(
+            (got - expected).abs() < 1e-4 * expected,
+            "chi2({q}, {dof}) = {got}"
+        );
+    }
+    let t = ChiSquareTest::new(10.0, 10);
+    assert!(t.passed);
+    assert!(!ChiSquareTest::new(30.0, 10).passed);
+    assert!(!ChiSquareTest::new(1.0, 0).passed);
+}
+
+// ---------- resection ----------
+
+fn resection_scene(rng: &mut Rng, n: usize, f: f64, pose: &Pose) -> Vec<Correspondence> {
+    let m = pose.rotation();
+    let mut out = Vec::new();
+    while out.len() < n {
+        let q = nalgebra::Vector3::new(
+            rng.uniform(-4.0, 4.0),
+            rng.uniform(-3.0, 3.0),
+            -rng.uniform(5.0, 30.0),
+        );
+        let p = pose.centre_vec() + m.transpose() * q;
+        let point = [p[0], p[1], p[2]];
+        let xy = project(pose, f, &point).unwrap();
+        if xy[0].abs() < 3.2 && xy[1].abs() < 2.4 {
+            out.push(Correspondence { point, xy });
+        }
+    }
+    out
+}
+
+#[test]
+fn p3p_recovers_the_true_pose() {
+    let mut rng = Rng(21);
+    let f = 8.0;
+    for _ in 0..50 {
+        let truth = Pose::from_params(&[
+            rng.uniform(1.4, 1.7),
+            rng.uniform(-0.2, 0.2),
+            rng.uniform(-0.2, 0.2),
+            rng.uniform(-2.0, 2.0),
+            rng.uniform(-2.0, 2.0),
+            rng.uniform(0.0, 2.0),
+        ]);
+        let c = resection_scene(&mut rng, 3, f, &truth);
+        let mut sols = [Pose::default(); 4];
+        let n = p3p(&[c[0], c[1], c[2]], f, &mut sols);
+        assert!(n >= 1);
+        let best = sols[..n]
+            .iter()
+            .map(|s| {
+                let a = s.to_params();
+                let b = truth.to_params();
+                (0..6).map(|i| (a[i] - b[i]).abs()).fold(0.0, f64::max)
+            })
+            .fold(f64::INFINITY, f64::min);
+        assert!(best < 1e-6, "best P3P solution off by {best}");
+    }
+}
+
+use super::resection::p3p;
+
+#[test]
+fn ransac_resection_with_outliers_and_degenerate_input() {
+    let mut rng = Rng(33);
+    let f = 8.0;
+    let sigma = 0.0015; // 0.3 px of 5 um
+    let truth = Pose::from_degrees(91.0, 1.5, -2.0, [0.4, 3.0, 1.5]);
+    let mut c = resection_scene(&mut rng, 60, f, &truth);
+    for (i, ci) in c.iter_mut().enumerate() {
+        if i % 3 == 0 {
+            ci.xy[0] += rng.uniform(0.05, 0.3) * if i % 2 == 0 { 1.0 } else { -1.0 };
+        } else {
+            ci.xy[0] += sigma * rng.normal();
+            ci.xy[1] += sigma * rng.normal();
+        }
+    }
+    let cfg = ResectionConfig {
+        threshold_mm: 4.0 * sigma,
+        ..ResectionConfig::default()
+    };
+    let r = resect(&c, f, &cfg).unwrap();
+    assert_eq!(r.inliers, 40);
+    let (a, b) = (r.pose.to_params(), truth.to_params());
+    for i in 0..6 {
+        assert!(
+            (a[i] - b[i]).abs() <= 4.0 * r.std[i] + 1e-12,
+            "param {i}: {} vs {} (std {})",
+            a[i],
+            b[i],
+            r.std[i]
+        );
+    }
+    // Same input, same answer (deterministic RANSAC).
+    assert_eq!(resect(&c, f, &cfg).unwrap(), r);
+    // Too few points, collinear points, NaN.
+    assert_eq!(resect(&c[..3], f, &cfg), Err(ResectionError::TooFewPoints));
+    let line: Vec<Correspondence> = (0..10)
+        .map(|k| {
+            let point = [0.5 * k as f64 - 2.0, 15.0, 1.0];
+            Correspondence {
+                point,
+                xy: project(&truth, f, &point).unwrap(),
+            }
+        })
+        .collect();
+    assert!(resect(&line, f, &cfg).is_err());
+    let mut nan = c.clone();
+    nan[5].xy[1] = f64::NAN;
+    assert_eq!(resect(&nan, f, &cfg), Err(ResectionError::NotFinite));
+}
+
+// ---------- synthetic windows ----------
+
+pub(crate) struct Scene {
+    pub rig: Rig,
+    pub poses: Vec<Pose>,
+    pub points: Vec<[f64; 3]>,
+    /// (epoch, camera, point, xy observed, true error added beyond noise)
+    pub obs: Vec<(usize, u8, usize, [f64; 2], bool)>,
+}
+
+pub(crate) const PIXEL_MM: f64 = 0.005;
+pub(crate) const SIGMA_MM: f64 = 0.3 * PIXEL_MM;
+
+/// A random drive: `epochs` stereo pairs about 1 m apart with random attitude,
+/// `n_points` street points each seen in at least two epochs, 0.3 px noise,
+/// and a fraction `gross` of observations with a 10..50 px blunder.
+pub(crate) fn scene(seed: u64, epochs: usize, n_points: usize, gross: f64) -> Scene {
+    let mut rng = Rng(seed);
+    let cam = Interior {
+        width_px: 1280,
+        height_px: 960,
+        pixel_size_mm: [PIXEL_MM, PIXEL_MM],
+        focal_mm: 8.0,
+        principal_point_mm: [0.0, 0.0],
+        radial: [0.0, 0.0],
+        decentering: [0.0, 0.0],
+    };
+    let mut rig = Rig::rectified(cam, 0.5);
+    rig.relative_angles = [0.002, -0.004, 0.001];
+    rig.base_m = [0.5, 0.003, -0.002];
+    let mut poses = Vec::new();
+    let mut y = 0.0;
+    let mut x = 0.0;
+    for k in 0..epochs {
+        if k > 0 {
+            y += rng.uniform(0.8, 1.2);
+            x += rng.uniform(-0.1, 0.1);
+        }
+        poses.push(Pose::from_degrees(
+            90.0 + rng.uniform(-2.0, 2.0),
+            rng.uniform(-2.0, 2.0),
+            rng.uniform(-2.0, 2.0),
+            [x, y, 1.5 + rng.uniform(-0.05, 0.05)],
+        ));
+    }
+    let half = [3.2 - 0.01, 2.4 - 0.01];
+    let mut points = Vec::new();
+    let mut obs = Vec::new();
+    while points.len() < n_points {
+        let p = [
+            rng.uniform(-8.0, 8.0),
+            rng.uniform(4.0, y + 25.0),
+            rng.uniform(-1.0, 6.0),
+        ];
+        let mut seen = Vec::new();
+        for (e, pose) in poses.iter().enumerate() {
+            for cam in [Camera::Left, Camera::Right] {
+                let rp = RigParams::from_rig(&rig);
+                if let Ok(pr) = project_rig(pose, &rp, cam, 8.0, &p) {
+                    let depth_ok = (pose.to_camera(&p)[2]) < -3.0;
+                    if pr.xy[0].abs() < half[0] && pr.xy[1].abs() < half[1] && depth_ok {
+                        seen.push((e, cam as u8, pr.xy));
+                    }
+                }
+            }
+        }
+        let epochs_seen = {
+            let mut v: Vec<usize> = seen.iter().map(|s| s.0).collect();
+            v.dedup();
+            v.len()
+        };
+        if epochs_seen < 2 || seen.len() < 4 {
+            continue;
+        }
+        let id = points.len();
+        points.push(p);
+        for (e, c, xy) in seen {
+            let mut m = [
+                xy[0] + SIGMA_MM * rng.normal(),
+                xy[1] + SIGMA_MM * rng.normal(),
+            ];
+            let blunder = rng.uniform(0.0, 1.0) < gross;
+            if blunder {
+                let mag = rng.uniform(10.0, 50.0) * PIXEL_MM;
+                let ang = rng.uniform(0.0, 2.0 * core::f64::consts::PI);
+                m[0] += mag * libm::cos(ang);
+                m[1] += mag * libm::sin(ang);
+            }
+            obs.push((e, c, id, m, blunder));
+        }
+    }
+    Scene {
+        rig,
+        poses,
+        points,
+        obs,
+    }
+}
+
+/// Loads a scene into a window with perturbed initial values; returns the
+/// window and the point indices.
+pub(crate) fn load<'a>(
+    s: &Scene,
+    cfg: AdjustConfig,
+    arena: &mut Arena<'a>,
+    seed: u64,
+) -> (Window<'a>, Vec<u32>) {
+    let mut rng = Rng(seed);
+    let mut w = Window::new(cfg, &s.rig, arena).unwrap();
+    for (k, p) in s.poses.iter().enumerate() {
+        let mut q = p.to_params();
+        if k > 0 {
+            for (i, qi) in q.iter_mut().enumerate() {
+                *qi += if i < 3 {
+                    rng.uniform(-0.01, 0.01)
+                } else {
+                    rng.uniform(-0.1, 0.1)
+                };
+            }
+        }
+        w.add_epoch(&Pose::from_params(&q), k as f64 * 0.2).unwrap();
+    }
+    let ids: Vec<u32> = s
+        .points
+        .iter()
+        .map(|p| {
+            w.add_point([
+                p[0] + rng.uniform(-0.2, 0.2),
+                p[1] + rng.uniform(-0.2, 0.2),
+                p[2] + rng.uniform(-0.2, 0.2),
+            ])
+            .unwrap()
+        })
+        .collect();
+    let wt = 1.0 / (SIGMA_MM * SIGMA_MM);
+    for (e, c, p, xy, _) in &s.obs {
+        let cam = if *c == 0 { Camera::Left } else { Camera::Right };
+        w.add_observation(Observation::new(*e as u32, cam, ids[*p], *xy, [wt, wt]))
+            .unwrap();
+    }
+    (w, ids)
+}
+
+/// Fraction of parameters (poses and points) within `k` sigma of the truth.
+pub(crate) fn within(w: &Window, s: &Scene, ids: &[u32], k: f64) -> (usize, usize) {
+    let (mut ok, mut n) = (0, 0);
+    for (e, truth) in s.poses.iter().enumerate() {
+        let est = w.epoch_pose(e).unwrap().to_params();
+        let std = w.epoch_std(e).unwrap();
+        let t = truth.to_params();
+        for i in 0..6 {
+            n += 1;
+            // The datum epoch has sigma ~1e-6: compare at that scale.
+            if (est[i] - t[i]).abs() <= k * std[i] + 1e-9 {
+                ok += 1;
+            }
+        }
+    }
+    for (p, truth) in s.points.iter().enumerate() {
+        let (Some(est), Some(std)) = (w.point(ids[p]), w.point_std(ids[p])) else {
+            continue;
+        };
+        for a in 0..3 {
+            n += 1;
+            if (est[a] - truth[a]).abs() <= k * std[a] {
+                ok += 1;
+            }
+        }
+    }
+    (ok, n)
+}
+
+fn arena_for(cfg: &AdjustConfig) -> Vec<u8> {
+    let mut b = MemoryBudget::new();
+    cfg.budget(&mut b);
+    vec![0u8; b.total()]
+}
+
+#[test]
+fn budget_matches_what_the_window_takes() {
+    let cfg = AdjustConfig {
+        window: 8,
+        max_points: 300,
+        max_observations: 1200,
+        ..AdjustConfig::default()
+    };
+    let mut b = MemoryBudget::new();
+    cfg.budget(&mut b);
+    let mut mem = vec![0u8; b.total()];
+    let mut arena = Arena::new(&mut mem);
+    let s = scene(1, 3, 30, 0.0);
+    let (_w, _) = load(&s, cfg, &mut arena, 2);
+    assert!(arena.used() <= b.total_with_prefix("adjust."));
+    assert!(
+        arena.used() + 128 >= b.total_with_prefix("adjust."),
+        "used {} predicted {}",
+        arena.used(),
+        b.total()
+    );
+}
+
+#[test]
+fn clean_windows_are_unbiased_with_unit_sigma0() {
+    let (mut ok, mut n) = (0, 0);
+    for (seed, epochs, points) in [
+        (1u64, 2usize, 50usize),
+        (2, 5, 200),
+        (3, 8, 300),
+        (4, 20, 500),
+    ] {
+        let s = scene(seed, epochs, points, 0.0);
+        let cfg = AdjustConfig {
+            window: epochs,
+            max_points: points,
+            max_observations: s.obs.len(),
+            robust: Robust::None,
+            ..AdjustConfig::default()
+        };
+        let mut mem = arena_for(&cfg);
+        let mut arena = Arena::new(&mut mem);
+        let (mut w, ids) = load(&s, cfg, &mut arena, seed + 100);
+        let r = w.solve().unwrap();
+        assert!(r.converged, "{r:?}");
+        assert!(
+            (r.sigma0 - 1.0).abs() < 0.1,
+            "seed {seed}: sigma0 {}",
+            r.sigma0
+        );
+        assert!(r.chi2.passed, "seed {seed}: {:?}", r.chi2);
+        assert_eq!(r.excluded_points, 0);
+        let (o, t) = within(&w, &s, &ids, 3.0);
+        ok += o;
+        n += t;
+    }
+    let frac = ok as f64 / n as f64;
+    assert!(frac >= 0.99, "{ok}/{n} within 3 sigma");
+}
+
+#[test]
+fn robust_default_flags_blunders_on_clean_and_dirty_data() {
+    // Clean data: the default (snooping) flags almost nothing.
+    let s = scene(7, 6, 300, 0.0);
+    let cfg = AdjustConfig {
+        window: 6,
+        max_points: 300,
+        max_observations: s.obs.len(),
+        ..AdjustConfig::default()
+    };
+    let mut mem = arena_for(&cfg);
+    let mut arena = Arena::new(&mut mem);
+    let (mut w, _) = load(&s, cfg, &mut arena, 8);
+    let r = w.solve().unwrap();
+    assert!(r.flagged as f64 <= 0.01 * s.obs.len() as f64, "{r:?}");
+    assert!(r.chi2.passed, "{r:?}");
+
+    // 10 % gross errors of 10..50 px.
+    let (mut caught, mut blunders, mut false_flags, mut good) = (0, 0, 0, 0);
+    let (mut ok, mut n) = (0, 0);
+    for seed in [11u64, 12] {
+        let s = scene(seed, 6, 300, 0.10);
+        let cfg = AdjustConfig {
+            window: 6,
+            max_points: 300,
+            max_observations: s.obs.len(),
+            ..AdjustConfig::default()
+        };
+        let mut mem = arena_for(&cfg);
+        let mut arena = Arena::new(&mut mem);
+        let (mut w, ids) = load(&s, cfg, &mut arena, seed);
+        let r = w.solve().unwrap();
+        for (i, o) in w.observations().iter().enumerate() {
+            if s.obs[i].4 {
+                blunders += 1;
+                caught += o.is_flagged() as usize;
+            } else {
+                good += 1;
+                false_flags += o.is_flagged() as usize;
+            }
+        }
+        assert!((r.sigma0 - 1.0).abs() < 0.1, "{r:?}");
+        let (o, t) = within(&w, &s, &ids, 3.0);
+        ok += o;
+        n += t;
+    }
+    assert!(
+        caught as f64 >= 0.99 * blunders as f64,
+        "caught {caught}/{blunders}"
+    );
+    assert!(
+        false_flags as f64 <= 0.01 * good as f64,
+        "false {false_flags}/{good}"
+    );
+    assert!(ok as f64 >= 0.99 * n as f64, "{ok}/{n} within 3 sigma");
+}
+
+#[test]
+fn estimated_rig_and_sliding_window_stay_within_three_sigma() {
+    // Rig estimated with a prior, perturbed start; then slide through 8 epochs with a window of 4.
+    let s = scene(21, 8, 400, 0.0);
+    let cfg = AdjustConfig {
+        window: 4,
+        max_points: 400,
+        max_observations: s.obs.len(),
+        estimate_rig: true,
+        sigmas: ConstraintSigmas {
+            rig_angle_rad: 0.01,
+            rig_base_m: 0.01,
+            base_length_m: 0.01,
+            velocity_change_mps: 5.0,
+            ..ConstraintSigmas::default()
+        },
+        ..AdjustConfig::default()
+    };
+    let mut mem = arena_for(&cfg);
+    let mut arena = Arena::new(&mut mem);
+    let mut w = Window::new(cfg, &s.rig, &mut arena).unwrap();
+    let wt = 1.0 / (SIGMA_MM * SIGMA_MM);
+    let mut ids = vec![u32::MAX; s.points.len()];
+    let (mut ok, mut n) = (0, 0);
+    for k in 0..8 {
+        if w.n_epochs() == 4 {
+            let dropped = w.slide().unwrap();
+            let t = s.poses[k - 4].to_params();
+            let d = dropped.to_params();
+            for i in 0..6 {
+                assert!(
+                    (d[i] - t[i]).abs() < 0.01,
+                    "dropped epoch {} param {i}",
+                    k - 4
+                );
+            }
+        }
+        let mut q = s.poses[k].to_params();
+        if k > 0 {
+            q[4] += 0.05;
+            q[0] += 0.003;
+        }
+        let id = w.add_epoch(&Pose::from_params(&q), 0.2 * k as f64).unwrap();
+        assert_eq!(id as usize, k);
+        for (e, c, p, xy, _) in &s.obs {
+            if *e != k {
+                continue;
+            }
+            if ids[*p] == u32::MAX
+                || w.point_excluded(ids[*p])
+                    && w.point(ids[*p]).is_none()
+                    && w.observations().iter().all(|o| o.point != ids[*p])
+            {
+                let t = s.points[*p];
+                ids[*p] = w.add_point([t[0] + 0.1, t[1] - 0.1, t[2] + 0.05]).unwrap();
+            }
+            let cam = if *c == 0 { Camera::Left } else { Camera::Right };
+            w.add_observation(Observation::new(k as u32, cam, ids[*p], *xy, [wt, wt]))
+                .unwrap();
+        }
+        if k == 0 {
+            continue;
+        }
+        let r = w.solve().unwrap();
+        assert!(r.converged && r.chi2.passed, "epoch {k}: {r:?}");
+        let first = w.epoch_id(0).unwrap() as usize;
+        for slot in 0..w.n_epochs() {
+            let est = w.epoch_pose(slot).unwrap().to_params();
+            let sd = w.epoch_std(slot).unwrap();
+            let t = s.poses[first + slot].to_params();
+            for i in 0..6 {
+                n += 1;
+                ok += ((est[i] - t[i]).abs() <= 3.0 * sd[i] + 1e-9) as usize;
+            }
+        }
+        let rs = w.rig_std();
+        let est = w.rig().to_array();
+        let truth = RigParams::from_rig(&s.rig).to_array();
+        for i in 0..6 {
+            n += 1;
+            ok += ((est[i] - truth[i]).abs() <= 3.0 * rs[i]) as usize;
+        }
+    }
+    assert!(ok as f64 >= 0.97 * n as f64, "{ok}/{n}");
+}
+
+#[test]
+fn degenerate_input_errors_or_flags_never_panics() {
+    let cam = Interior::pinhole_px(1280, 960, 1600.0);
+    // Zero base.
+    let cfg = AdjustConfig {
+        window: 3,
+        max_points: 50,
+        max_observations: 400,
+        ..AdjustConfig::default()
+    };
+    let mut mem = arena_for(&cfg);
+    {
+        let mut arena = Arena::new(&mut mem);
+        assert!(matches!(
+            Window::new(cfg, &Rig::rectified(cam, 0.0), &mut arena),
+            Err(AdjustError::ZeroBase)
+        ));
+    }
+    // Out of memory, invalid config.
+    {
+        let mut small = [0u8; 64];
+        let mut arena = Arena::new(&mut small);
+        assert!(matches!(
+            Window::new(cfg, &Rig::rectified(cam, 0.5), &mut arena),
+            Err(AdjustError::OutOfMemory(_))
+        ));
+        let mut arena = Arena::new(&mut mem);
+        let bad = AdjustConfig { window: 0, ..cfg };
+        assert!(matches!(
+            Window::new(bad, &Rig::rectified(cam, 0.5), &mut arena),
+            Err(AdjustError::InvalidConfig)
+        ));
+    }
+    let s = scene(31, 3, 40, 0.0);
+    let wt = 1.0 / (SIGMA_MM * SIGMA_MM);
+    // NaN observation, NaN pose, unknown ids, capacity.
+    {
+        let mut arena = Arena::new(&mut mem);
+        let (mut w, ids) = load(&s, cfg, &mut arena, 1);
+        let nan = Observation::new(0, Camera::Left, ids[0], [f64::NAN, 0.0], [wt, wt]);
+        assert_eq!(w.add_observation(nan), Err(AdjustError::NotFinite));
+        let zero_w = Observation::new(0, Camera::Left, ids[0], [0.0, 0.0], [0.0, wt]);
+        assert_eq!(w.add_observation(zero_w), Err(AdjustError::NotFinite));
+        assert_eq!(
+            w.add_observation(Observation::new(
+                9,
+                Camera::Left,
+                ids[0],
+                [0.0; 2],
+                [wt, wt]
+            )),
+            Err(AdjustError::Unknown)
+        );
+        assert_eq!(
+            w.add_epoch(&Pose::from_params(&[f64::NAN; 6]), 0.0),
+            Err(AdjustError::NotFinite)
+        );
+        assert_eq!(w.add_epoch(&s.poses[0], 1.0), Err(AdjustError::WindowFull));
+        for _ in 0..20 {
+            let _ = w.add_point([0.0, 10.0, 0.0]);
+        }
+        assert!(w.dropped().0 > 0);
+        // Still solvable: points without observations are simply excluded.
+        let r = w.solve().unwrap();
+        assert!(r.excluded_points > 0 && r.chi2.passed, "{r:?}");
+    }
+    // Too few points: one point seen in two epochs cannot fix epoch 1.
+    {
+        let mut arena = Arena::new(&mut mem);
+        let mut w = Window::new(cfg, &s.rig, &mut arena).unwrap();
+        w.add_epoch(&s.poses[0], 0.0).unwrap();
+        w.add_epoch(&s.poses[1], 0.2).unwrap();
+        let p = w.add_point(s.points[0]).unwrap();
+        for (e, c, pi, xy, _) in s.obs.iter().filter(|o| o.2 == 0 && o.0 < 2) {
+            let cam = if *c == 0 { Camera::Left } else { Camera::Right };
+            let _ = pi;
+            w.add_observation(Observation::new(*e as u32, cam, p, *xy, [wt, wt]))
+                .unwrap();
+        }
+        let r = w.solve();
+        assert!(
+            matches!(
+                r,
+                Err(AdjustError::Singular { .. }) | Err(AdjustError::NoRedundancy)
+            ),
+            "{r:?}"
+        );
+    }
+    // All points on a line: the second epoch can rotate about it.
+    {
+        let mut arena = Arena::new(&mut mem);
+        let mut w = Window::new(cfg, &s.rig, &mut arena).unwrap();
+        w.add_epoch(&s.poses[0], 0.0).unwrap();
+        w.add_epoch(&s.poses[1], 0.2).unwrap();
+        let rp = RigParams::from_rig(&s.rig);
+        for k in 0..30 {
+            let pt = [-3.0 + 0.2 * k as f64, 15.0, 1.0];
+            let id = w.add_point(pt).unwrap();
+            for e in 0..2 {
+                for cam in [Camera::Left, Camera::Right] {
+                    let xy = project_rig(&s.poses[e], &rp, cam, 8.0, &pt).unwrap().xy;
+                    w.add_observation(Observation::new(e as u32, cam, id, xy, [wt, wt]))
+                        .unwrap();
+                }
+            }
+        }
+        let r = w.solve();
+        assert!(
+            matches!(r, Err(AdjustError::Singular { epoch: 1 })),
+            "{r:?}"
+        );
+        assert_eq!(w.singular_epoch(), Some(1));
+    }
+    // A point at infinity (identical rays) is excluded, the rest adjusts.
+    {
+        let mut arena = Arena::new(&mut mem);
+        let (mut w, _) = load(&s, cfg, &mut arena, 3);
+        let far = w.add_point([0.0, 1e12, 0.0]).unwrap();
+        let xy = [0.0, 0.0];
+        for e in 0..3u32 {
+            w.add_observation(Observation::new(e, Camera::Left, far, xy, [wt, wt]))
+                .unwrap();
+            w.add_observation(Observation::new(e, Camera::Right, far, xy, [wt, wt]))
+                .unwrap();
+        }
+        let r = w.solve().unwrap();
+        assert!(w.point_excluded(far), "{r:?}");
+        assert!(r.excluded_points >= 1);
+    }
+    // Too few epochs to slide, nothing to solve.
+    {
+        let mut arena = Arena::new(&mut mem);
+        let mut w = Window::new(cfg, &s.rig, &mut arena).unwrap();
+        assert_eq!(w.solve(), Err(AdjustError::TooFewEpochs));
+        assert_eq!(w.slide(), Err(AdjustError::TooFewEpochs));
+        w.add_epoch(&s.poses[0], 0.0).unwrap();
+        assert_eq!(w.solve(), Err(AdjustError::NoRedundancy));
+    }
+}

@@ -1,0 +1,78 @@
+//! Observation weights: seed 000's schemes and the robust estimation.
+//!
+//! Weights are `p = sigma0^2 / sigma^2` (seed 000 eq. 51) per coordinate.
+//! - [`Scheme::Sigma`] (default): `1/sigma^2` from the measuring precision, so
+//!   sigma0 a posteriori is 1 when the precision is right.
+//! - [`Scheme::Parallax`] (seed 000 default): `p_x = pa_x^2`, `p_y = 1/pa_y^2`
+//!   with `pa_x, pa_y` the stereo parallaxes (left minus right) of the point at
+//!   that epoch; `pa_y` is bounded below by [`MIN_Y_PARALLAX_MM`] (the seed
+//!   divides by it and leaves zero undefined).
+//! - [`Scheme::Radial`] (seed 000 eq. 50): both coordinates weigh the radial
+//!   distance from the principal point, `sqrt(xc^2 + yc^2)`.
+//! - [`Scheme::Equal`] (seed 000 §7.3.4): every coordinate weighs 0.0001.
+//!
+//! The robust default ([`super::Robust::Snooping`]) first iterates with Cauchy
+//! weights on a robust (median) scale, then tests every observation with
+//! `T = v^T Q_vv^-1 v` (2 degrees of freedom) and excludes the outliers, repeating
+//! until the set is stable: see [`super::window`].
+
+/// Smallest y-parallax the parallax scheme divides by, mm.
+pub const MIN_Y_PARALLAX_MM: f64 = 1e-3;
+/// Seed 000 equal weight.
+pub const SEED_EQUAL_WEIGHT: f64 = 1e-4;
+/// Seed 000 weight given to an observation whose residual exceeds the pixel size.
+pub const SEED_REWEIGHT: f64 = 1e-5;
+
+/// How the caller derives observation weights.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Scheme {
+    /// `1/sigma^2` with the given photo-coordinate precision, mm.
+    Sigma(f64),
+    Parallax,
+    Radial,
+    Equal,
+}
+
+/// Weights `[p_x, p_y]` of one observation. `partner` is the same point's
+/// corrected coordinates in the other image of the stereo pair (for parallax).
+pub fn weights(scheme: Scheme, xy: [f64; 2], partner: Option<[f64; 2]>) -> [f64; 2] {
+    match scheme {
+        Scheme::Sigma(s) => {
+            let p = 1.0 / (s * s);
+            [p, p]
+        }
+        Scheme::Equal => [SEED_EQUAL_WEIGHT, SEED_EQUAL_WEIGHT],
+        Scheme::Radial => {
+            let r = libm::sqrt(xy[0] * xy[0] + xy[1] * xy[1]);
+            [r, r]
+        }
+        Scheme::Parallax => match partner {
+            Some(q) => {
+                let pax = xy[0] - q[0];
+                let pay = (xy[1] - q[1]).abs().max(MIN_Y_PARALLAX_MM);
+                [pax * pax, 1.0 / (pay * pay)]
+            }
+            None => [SEED_EQUAL_WEIGHT, SEED_EQUAL_WEIGHT],
+        },
+    }
+}
+
+/// Cauchy weight factor for a standardised residual `t` (tuning constant `c`).
+pub fn cauchy_factor(t: f64, c: f64) -> f64 {
+    let u = t / c;
+    1.0 / (1.0 + u * u)
+}
+
+/// Median of the chi-square law with 2 degrees of freedom (`2 ln 2`): the
+/// robust scale of `T` statistics is `median(T) / CHI2_2_MEDIAN`.
+pub const CHI2_2_MEDIAN: f64 = core::f64::consts::LN_2 * 2.0;
+
+/// Median of `values` (reordered in place); 0 for an empty slice.
+pub fn median(values: &mut [f64]) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    let mid = values.len() / 2;
+    let (_, m, _) = values.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+    *m
+}

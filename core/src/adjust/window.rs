@@ -1,0 +1,1876 @@
+//! The sliding-window bundle adjuster.
+//!
+//! Unknowns: the left camera's `(omega, phi, kappa, X, Y, Z)` of every epoch in
+//! the window, optionally the relative orientation of the rig
+//! `(omega, phi, kappa, bx, by, bz)` with a prior, and the tie points. The
+//! normal equations are built point by point: each point's 3x3 block `V` is
+//! eliminated at once (Schur complement), so only the reduced camera system
+//! `S = U - W V^-1 W^T` (at most `6 (N + 1)` square) is stored; it is damped
+//! (Levenberg-Marquardt, Marquardt's diagonal scaling) and solved by Cholesky
+//! in place; the point steps follow by back-substitution
+//! `dp = V^-1 (b_p - W^T dc)`.
+//!
+//! Sliding (see docs/adjustment.md): the leaving epoch is *fixed*: its pose is
+//! final and its observations leave the window. Its information is carried as a
+//! prior on the new first epoch: that epoch's adjusted pose with the 6x6
+//! marginal covariance of the last solution (from the inverse of the reduced
+//! normal matrix). This keeps the datum and lets the uncertainty of the traverse
+//! grow; it is not exact marginalisation (the correlations between the new first
+//! epoch and the rest are dropped), which keeps the reduced system dense and
+//! small and never fills in tie points.
+//!
+//! All storage comes from the [`Arena`], sized by [`AdjustConfig::budget`].
+
+use super::cholesky;
+use super::constraints::{base_length, distance, prior_residual, smoothness};
+use super::geometry::{project_rig, Camera, RigParams};
+use super::quality::ChiSquareTest;
+use super::weighting::{cauchy_factor, median, CHI2_2_MEDIAN, SEED_REWEIGHT};
+use crate::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget, OutOfMemory};
+use crate::camera::{Pose, Rig};
+use bytemuck::{Pod, Zeroable};
+use nalgebra::{Matrix3, Vector3};
+
+/// Standard deviations of the weighted constraints. A value `<= 0` switches
+/// the constraint off (the datum cannot be switched off).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ConstraintSigmas {
+    /// Datum: attitude of the first epoch, radians.
+    pub datum_angle_rad: f64,
+    /// Datum: position of the first epoch, metres.
+    pub datum_position_m: f64,
+    /// Prior on the relative angles when the rig is estimated, radians.
+    pub rig_angle_rad: f64,
+    /// Prior on the base vector when the rig is estimated, metres.
+    pub rig_base_m: f64,
+    /// Base length constraint (seed 000 eq. 44), metres.
+    pub base_length_m: f64,
+    /// Motion smoothness: change of velocity between consecutive intervals, m/s.
+    pub velocity_change_mps: f64,
+}
+
+impl Default for ConstraintSigmas {
+    fn default() -> Self {
+        ConstraintSigmas {
+            datum_angle_rad: 1e-6,
+            datum_position_m: 1e-6,
+            rig_angle_rad: 1e-3,
+            rig_base_m: 1e-3,
+            base_length_m: 0.0,
+            velocity_change_mps: 0.0,
+        }
+    }
+}
+
+/// Treatment of blunders.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Robust {
+    /// Plain least squares.
+    None,
+    /// Default: Cauchy re-weighting on a median scale, then data snooping of
+    /// `T = v^T Q_vv^-1 v` against `critical` (chi-square, 2 dof) until stable.
+    Snooping { critical: f64 },
+    /// Seed 000: after one adjustment, observations whose x residual exceeds
+    /// `threshold_mm` (the pixel size) get weight 1e-5 and the adjustment reruns once.
+    SeedReweight { threshold_mm: f64 },
+}
+
+impl Robust {
+    /// Snooping at the 0.1 % level: `chi2(0.999, 2) = 13.8155`.
+    pub const fn snooping() -> Self {
+        Robust::Snooping {
+            critical: 13.815510557964274,
+        }
+    }
+}
+
+/// Configuration of the adjustment: capacities, iterations, constraints.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AdjustConfig {
+    /// Epochs in the window (2 reproduces seed 000's four-image sequences).
+    pub window: usize,
+    pub max_points: usize,
+    pub max_observations: usize,
+    /// Levenberg-Marquardt iterations per least-squares solution.
+    pub max_iterations: usize,
+    /// Robust rounds (re-weighting and snooping rounds each).
+    pub max_robust_rounds: usize,
+    /// Estimate the relative orientation (with the prior of `sigmas`) or keep it fixed.
+    pub estimate_rig: bool,
+    pub sigmas: ConstraintSigmas,
+    pub robust: Robust,
+    /// Convergence: relative decrease of `vTPv` below this stops the iterations.
+    pub tolerance: f64,
+}
+
+impl Default for AdjustConfig {
+    fn default() -> Self {
+        AdjustConfig {
+            window: 8,
+            max_points: 500,
+            max_observations: 4000,
+            max_iterations: 50,
+            max_robust_rounds: 8,
+            estimate_rig: false,
+            sigmas: ConstraintSigmas::default(),
+            robust: Robust::snooping(),
+            tolerance: 1e-12,
+        }
+    }
+}
+
+/// Why the adjustment refused or failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AdjustError {
+    OutOfMemory(OutOfMemory),
+    /// A configuration value is out of range (window < 1, zero capacities).
+    InvalidConfig,
+    /// The rig has a zero base or non-finite values.
+    ZeroBase,
+    /// A value given to the window is NaN or infinite, or a weight is not positive.
+    NotFinite,
+    /// The window already holds `window` epochs: slide first.
+    WindowFull,
+    /// Point or observation capacity reached (the item was dropped and counted).
+    CapacityFull,
+    /// Epoch id or point index not in the window.
+    Unknown,
+    /// Fewer than two epochs to slide, or nothing to adjust.
+    TooFewEpochs,
+    /// Not enough observations: the redundancy is not positive.
+    NoRedundancy,
+    /// The reduced normal matrix is singular: the epoch (slot) whose
+    /// parameters are undetermined (points on a line, too few points, no datum).
+    Singular {
+        epoch: usize,
+    },
+}
+
+impl From<OutOfMemory> for AdjustError {
+    fn from(e: OutOfMemory) -> Self {
+        AdjustError::OutOfMemory(e)
+    }
+}
+
+impl core::fmt::Display for AdjustError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            AdjustError::OutOfMemory(e) => write!(f, "{e}"),
+            AdjustError::InvalidConfig => f.write_str("invalid adjustment configuration"),
+            AdjustError::ZeroBase => f.write_str("rig base is zero or not finite"),
+            AdjustError::NotFinite => f.write_str("value is not finite or weight not positive"),
+            AdjustError::WindowFull => f.write_str("window is full: slide first"),
+            AdjustError::CapacityFull => f.write_str("point or observation capacity reached"),
+            AdjustError::Unknown => f.write_str("unknown epoch or point"),
+            AdjustError::TooFewEpochs => f.write_str("too few epochs"),
+            AdjustError::NoRedundancy => f.write_str("no redundancy: too few observations"),
+            AdjustError::Singular { epoch } => {
+                write!(
+                    f,
+                    "normal matrix singular: epoch slot {epoch} is undetermined"
+                )
+            }
+        }
+    }
+}
+
+/// One image measurement of a tie point.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct Observation {
+    /// Corrected photo-coordinates `(xc, yc)`, mm.
+    pub xy: [f64; 2],
+    /// Weights `[p_x, p_y]`, `1/mm^2` for the sigma scheme.
+    pub weight: [f64; 2],
+    /// Robust factor set by the solver (1 = full weight, 0 = excluded).
+    pub factor: f64,
+    /// Point index (from [`Window::add_point`]).
+    pub point: u32,
+    /// Epoch id (from [`Window::add_epoch`]).
+    pub epoch: u32,
+    /// Caller's tag (track id, line number), carried untouched.
+    pub tag: u32,
+    /// 0 = left, 1 = right.
+    pub camera: u8,
+    /// [`Observation::FLAGGED`], [`Observation::BEHIND`].
+    pub flags: u8,
+    pub _pad: [u8; 2],
+}
+
+impl Observation {
+    /// Flagged as a blunder (excluded, or down-weighted by the seed scheme).
+    pub const FLAGGED: u8 = 1;
+    /// Behind its camera at the last evaluation.
+    pub const BEHIND: u8 = 2;
+
+    pub fn new(epoch: u32, camera: Camera, point: u32, xy: [f64; 2], weight: [f64; 2]) -> Self {
+        Observation {
+            xy,
+            weight,
+            factor: 1.0,
+            point,
+            epoch,
+            tag: 0,
+            camera: camera as u8,
+            flags: 0,
+            _pad: [0; 2],
+        }
+    }
+
+    pub fn is_flagged(&self) -> bool {
+        self.flags & Self::FLAGGED != 0
+    }
+}
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+struct EpochSlot {
+    params: [f64; 6],
+    prior: [f64; 6],
+    prior_info: [f64; 36],
+    cov: [f64; 36],
+    gnss: [f64; 3],
+    gnss_sigma: f64,
+    odometer: f64,
+    odometer_sigma: f64,
+    time: f64,
+    id: u32,
+    flags: u32,
+}
+
+const EP_PRIOR: u32 = 1;
+const EP_GNSS: u32 = 2;
+const EP_ODOMETER: u32 = 4;
+const EP_COV: u32 = 8;
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+struct PointSlot {
+    xyz: [f64; 3],
+    std: [f64; 3],
+    prior: [f64; 3],
+    prior_sigma: f64,
+    nobs: u32,
+    flags: u32,
+}
+
+const PT_USED: u32 = 1;
+const PT_PRIOR: u32 = 2;
+const PT_EXCLUDED: u32 = 4;
+
+/// Per camera block scratch of one point: `W` (6x3), the block's own `U`
+/// (6x6), its cross block with the rig (6x6) and its gradient.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+struct BlockScratch {
+    w: [f64; 18],
+    u: [f64; 36],
+    u_rig: [f64; 36],
+    g: [f64; 6],
+}
+
+/// What one adjustment found.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Report {
+    /// Levenberg-Marquardt iterations, all rounds.
+    pub iterations: usize,
+    /// The last least-squares solution met the tolerance.
+    pub converged: bool,
+    /// A-posteriori standard deviation of unit weight.
+    pub sigma0: f64,
+    /// Global chi-square test (two-sided, 95 %).
+    pub chi2: ChiSquareTest,
+    /// Redundancy `n + n_x - u`.
+    pub redundancy: usize,
+    /// Image observations used (each has two coordinates).
+    pub observations: usize,
+    /// Constraint equations.
+    pub constraints: usize,
+    /// Unknowns.
+    pub unknowns: usize,
+    /// Observations flagged as blunders.
+    pub flagged: usize,
+    /// Points left out (fewer than two rays, or at infinity).
+    pub excluded_points: usize,
+    /// Observations behind their camera at the solution.
+    pub behind: usize,
+    /// Robust rounds run.
+    pub robust_rounds: usize,
+    /// Final `vTPv`.
+    pub cost: f64,
+}
+
+/// Result of building one point's blocks.
+struct PointBlocks {
+    v: Matrix3<f64>,
+    b: Vector3<f64>,
+    used: usize,
+    touched: usize,
+}
+
+/// The sliding window: epochs, points, observations and the solver's buffers.
+pub struct Window<'a> {
+    cfg: AdjustConfig,
+    rig: RigParams,
+    rig_prior: RigParams,
+    nominal_base: f64,
+    focal: [f64; 2],
+    rig_std: [f64; 6],
+    origin: [f64; 3],
+    epochs: &'a mut [EpochSlot],
+    n_epochs: usize,
+    first_id: u32,
+    points: &'a mut [PointSlot],
+    n_point_slots: usize,
+    obs: &'a mut [Observation],
+    n_obs: usize,
+    point_start: &'a mut [u32],
+    obs_order: &'a mut [u32],
+    reduced: &'a mut [f64],
+    rhs: &'a mut [f64],
+    saved_cam: &'a mut [f64],
+    saved_points: &'a mut [f64],
+    scratch: &'a mut [BlockScratch],
+    touched: &'a mut [u32],
+    residuals: &'a mut [f64],
+    work: &'a mut [f64],
+    dropped_points: usize,
+    dropped_observations: usize,
+    singular_epoch: Option<usize>,
+}
+
+impl AdjustConfig {
+    fn cam_capacity(&self) -> usize {
+        6 * (self.window + 1)
+    }
+
+    /// Adds the adjustment's buffers ("adjust." prefix) to `budget`.
+    pub fn budget(&self, budget: &mut MemoryBudget) {
+        let nc = self.cam_capacity();
+        let (p, o, w) = (self.max_points, self.max_observations, self.window);
+        budget.add(
+            "adjust.epochs",
+            ComponentKind::Storage,
+            slice_bytes::<EpochSlot>(w),
+        );
+        budget.add(
+            "adjust.points",
+            ComponentKind::Storage,
+            slice_bytes::<PointSlot>(p),
+        );
+        budget.add(
+            "adjust.observations",
+            ComponentKind::Storage,
+            slice_bytes::<Observation>(o),
+        );
+        budget.add(
+            "adjust.point_index",
+            ComponentKind::Working,
+            slice_bytes::<u32>(p + 1) + slice_bytes::<u32>(o),
+        );
+        budget.add(
+            "adjust.reduced_normal",
+            ComponentKind::Working,
+            slice_bytes::<f64>(nc * nc),
+        );
+        budget.add(
+            "adjust.vectors",
+            ComponentKind::Working,
+            2 * slice_bytes::<f64>(nc) + slice_bytes::<f64>(3 * p),
+        );
+        budget.add(
+            "adjust.point_scratch",
+            ComponentKind::Working,
+            slice_bytes::<BlockScratch>(w + 1) + slice_bytes::<u32>(w + 1),
+        );
+        budget.add(
+            "adjust.residuals",
+            ComponentKind::Working,
+            2 * slice_bytes::<f64>(o),
+        );
+    }
+
+    fn validate(&self) -> Result<(), AdjustError> {
+        let s = &self.sigmas;
+        let ok = self.window >= 1
+            && self.window <= 4096
+            && self.max_points >= 1
+            && self.max_points < u32::MAX as usize
+            && self.max_observations >= 1
+            && self.max_observations < u32::MAX as usize
+            && self.max_iterations >= 1
+            && s.datum_angle_rad > 0.0
+            && s.datum_position_m > 0.0
+            && (!self.estimate_rig || (s.rig_angle_rad > 0.0 && s.rig_base_m > 0.0))
+            && self.tolerance.is_finite();
+        if ok {
+            Ok(())
+        } else {
+            Err(AdjustError::InvalidConfig)
+        }
+    }
+}
+
+fn sym3_inverse(v: &Matrix3<f64>) -> Option<Matrix3<f64>> {
+    let tr = v[(0, 0)] + v[(1, 1)] + v[(2, 2)];
+    let det = v.determinant();
+    // det / trace^3 bounds lambda_min / lambda_max from below: a point seen
+    // along (nearly) one direction, i.e. at infinity, fails it.
+    if !(tr > 0.0) || !(det > 1e-10 * tr * tr * tr) {
+        return None;
+    }
+    v.try_inverse()
+}
+
+impl<'a> Window<'a> {
+    /// An empty window for `rig`, carving its buffers from `arena`.
+    pub fn new(cfg: AdjustConfig, rig: &Rig, arena: &mut Arena<'a>) -> Result<Self, AdjustError> {
+        cfg.validate()?;
+        if rig.validate().is_err() || !(rig.base_length() > 1e-9) {
+            return Err(AdjustError::ZeroBase);
+        }
+        let nc = cfg.cam_capacity();
+        let (p, o, w) = (cfg.max_points, cfg.max_observations, cfg.window);
+        let epochs = arena.alloc_slice::<EpochSlot>(w)?;
+        let points = arena.alloc_slice::<PointSlot>(p)?;
+        let obs = arena.alloc_slice::<Observation>(o)?;
+        let point_start = arena.alloc_slice::<u32>(p + 1)?;
+        let obs_order = arena.alloc_slice::<u32>(o)?;
+        let reduced = arena.alloc_slice::<f64>(nc * nc)?;
+        let rhs = arena.alloc_slice::<f64>(nc)?;
+        let saved_cam = arena.alloc_slice::<f64>(nc)?;
+        let saved_points = arena.alloc_slice::<f64>(3 * p)?;
+        let scratch = arena.alloc_slice::<BlockScratch>(w + 1)?;
+        let touched = arena.alloc_slice::<u32>(w + 1)?;
+        let residuals = arena.alloc_slice::<f64>(o)?;
+        let work = arena.alloc_slice::<f64>(o)?;
+        let r = RigParams::from_rig(rig);
+        Ok(Window {
+            cfg,
+            rig: r,
+            rig_prior: r,
+            nominal_base: rig.base_length(),
+            focal: [rig.left.focal_mm, rig.right.focal_mm],
+            rig_std: [0.0; 6],
+            origin: [0.0; 3],
+            epochs,
+            n_epochs: 0,
+            first_id: 0,
+            points,
+            n_point_slots: 0,
+            obs,
+            n_obs: 0,
+            point_start,
+            obs_order,
+            reduced,
+            rhs,
+            saved_cam,
+            saved_points,
+            scratch,
+            touched,
+            residuals,
+            work,
+            dropped_points: 0,
+            dropped_observations: 0,
+            singular_epoch: None,
+        })
+    }
+
+    pub fn config(&self) -> &AdjustConfig {
+        &self.cfg
+    }
+
+    /// Sets the nominal base length used by the base-length constraint (defaults to `|b|`).
+    pub fn set_base_length(&mut self, metres: f64) {
+        self.nominal_base = metres;
+    }
+
+    // ----- building the window -----
+
+    /// Adds an epoch with the approximate pose of its left camera (object
+    /// coordinates) and its time (seconds). The first epoch of an empty window
+    /// carries the datum. Returns the epoch id.
+    pub fn add_epoch(&mut self, left: &Pose, time_s: f64) -> Result<u32, AdjustError> {
+        let params = left.to_params();
+        if !params.iter().all(|v| v.is_finite()) || !time_s.is_finite() {
+            return Err(AdjustError::NotFinite);
+        }
+        if self.n_epochs >= self.cfg.window {
+            return Err(AdjustError::WindowFull);
+        }
+        if self.n_epochs == 0 {
+            self.origin = left.centre;
+        }
+        let mut local = params;
+        for a in 0..3 {
+            local[3 + a] -= self.origin[a];
+        }
+        let id = self.first_id + self.n_epochs as u32;
+        let mut slot = EpochSlot::zeroed();
+        slot.params = local;
+        slot.time = time_s;
+        slot.id = id;
+        if self.n_epochs == 0 {
+            let s = &self.cfg.sigmas;
+            let mut info = [0.0; 36];
+            for i in 0..6 {
+                let sig = if i < 3 {
+                    s.datum_angle_rad
+                } else {
+                    s.datum_position_m
+                };
+                info[i * 6 + i] = 1.0 / (sig * sig);
+            }
+            slot.prior = local;
+            slot.prior_info = info;
+            slot.flags |= EP_PRIOR;
+        }
+        self.epochs[self.n_epochs] = slot;
+        self.n_epochs += 1;
+        Ok(id)
+    }
+
+    fn slot_of(&self, epoch: u32) -> Option<usize> {
+        let s = epoch.checked_sub(self.first_id)? as usize;
+        (s < self.n_epochs).then_some(s)
+    }
+
+    /// A prior on an epoch's pose (object coordinates) with standard
+    /// deviations (angles rad, positions m); replaces any earlier prior.
+    pub fn set_pose_prior(
+        &mut self,
+        epoch: u32,
+        pose: &Pose,
+        sigmas: [f64; 6],
+    ) -> Result<(), AdjustError> {
+        let slot = self.slot_of(epoch).ok_or(AdjustError::Unknown)?;
+        let mut p = pose.to_params();
+        if !p.iter().chain(sigmas.iter()).all(|v| v.is_finite()) || sigmas.iter().any(|s| *s <= 0.0)
+        {
+            return Err(AdjustError::NotFinite);
+        }
+        for a in 0..3 {
+            p[3 + a] -= self.origin[a];
+        }
+        let e = &mut self.epochs[slot];
+        e.prior = p;
+        e.prior_info = [0.0; 36];
+        for i in 0..6 {
+            e.prior_info[i * 6 + i] = 1.0 / (sigmas[i] * sigmas[i]);
+        }
+        e.flags |= EP_PRIOR;
+        Ok(())
+    }
+
+    /// A GNSS position of the epoch's left perspective centre with its sigma (m).
+    pub fn set_gnss(
+        &mut self,
+        epoch: u32,
+        position: [f64; 3],
+        sigma_m: f64,
+    ) -> Result<(), AdjustError> {
+        let slot = self.slot_of(epoch).ok_or(AdjustError::Unknown)?;
+        if !position.iter().all(|v| v.is_finite()) || !(sigma_m > 0.0) || !sigma_m.is_finite() {
+            return Err(AdjustError::NotFinite);
+        }
+        let e = &mut self.epochs[slot];
+        e.gnss = [
+            position[0] - self.origin[0],
+            position[1] - self.origin[1],
+            position[2] - self.origin[2],
+        ];
+        e.gnss_sigma = sigma_m;
+        e.flags |= EP_GNSS;
+        Ok(())
+    }
+
+    /// An odometer distance (m) from the previous epoch to this one with its sigma.
+    pub fn set_odometer(
+        &mut self,
+        epoch: u32,
+        distance_m: f64,
+        sigma_m: f64,
+    ) -> Result<(), AdjustError> {
+        let slot = self.slot_of(epoch).ok_or(AdjustError::Unknown)?;
+        if !distance_m.is_finite() || !(sigma_m > 0.0) || !sigma_m.is_finite() {
+            return Err(AdjustError::NotFinite);
+        }
+        let e = &mut self.epochs[slot];
+        e.odometer = distance_m;
+        e.odometer_sigma = sigma_m;
+        e.flags |= EP_ODOMETER;
+        Ok(())
+    }
+
+    /// Adds a tie point at its approximate object coordinates; returns its index.
+    pub fn add_point(&mut self, xyz: [f64; 3]) -> Result<u32, AdjustError> {
+        if !xyz.iter().all(|v| v.is_finite()) {
+            return Err(AdjustError::NotFinite);
+        }
+        let slot = match self.points[..self.n_point_slots]
+            .iter()
+            .position(|p| p.flags & PT_USED == 0)
+        {
+            Some(s) => s,
+            None if self.n_point_slots < self.points.len() => {
+                self.n_point_slots += 1;
+                self.n_point_slots - 1
+            }
+            None => {
+                self.dropped_points += 1;
+                return Err(AdjustError::CapacityFull);
+            }
+        };
+        let mut p = PointSlot::zeroed();
+        p.xyz = [
+            xyz[0] - self.origin[0],
+            xyz[1] - self.origin[1],
+            xyz[2] - self.origin[2],
+        ];
+        p.flags = PT_USED;
+        self.points[slot] = p;
+        Ok(slot as u32)
+    }
+
+    /// Makes a point a control point: its coordinates are observed with `sigma_m`.
+    pub fn set_point_prior(
+        &mut self,
+        point: u32,
+        xyz: [f64; 3],
+        sigma_m: f64,
+    ) -> Result<(), AdjustError> {
+        let p = self.point_slot(point)?;
+        if !xyz.iter().all(|v| v.is_finite()) || !(sigma_m > 0.0) || !sigma_m.is_finite() {
+            return Err(AdjustError::NotFinite);
+        }
+        let o = self.origin;
+        let s = &mut self.points[p];
+        s.prior = [xyz[0] - o[0], xyz[1] - o[1], xyz[2] - o[2]];
+        s.prior_sigma = sigma_m;
+        s.flags |= PT_PRIOR;
+        Ok(())
+    }
+
+    fn point_slot(&self, point: u32) -> Result<usize, AdjustError> {
+        let p = point as usize;
+        if p < self.n_point_slots && self.points[p].flags & PT_USED != 0 {
+            Ok(p)
+        } else {
+            Err(AdjustError::Unknown)
+        }
+    }
+
+    /// Adds an observation; returns its index.
+    pub fn add_observation(&mut self, mut o: Observation) -> Result<usize, AdjustError> {
+        let valid = o.xy.iter().all(|v| v.is_finite())
+            && o.weight.iter().all(|w| w.is_finite() && *w > 0.0)
+            && o.camera <= 1;
+        if !valid {
+            return Err(AdjustError::NotFinite);
+        }
+        self.slot_of(o.epoch).ok_or(AdjustError::Unknown)?;
+        let p = self.point_slot(o.point)?;
+        if self.n_obs >= self.obs.len() {
+            self.dropped_observations += 1;
+            return Err(AdjustError::CapacityFull);
+        }
+        o.factor = 1.0;
+        o.flags = 0;
+        self.obs[self.n_obs] = o;
+        self.n_obs += 1;
+        self.points[p].nobs += 1;
+        Ok(self.n_obs - 1)
+    }
+
+    // ----- accessors -----
+
+    pub fn n_epochs(&self) -> usize {
+        self.n_epochs
+    }
+
+    /// Id of the epoch in slot `i` (0 = oldest).
+    pub fn epoch_id(&self, i: usize) -> Option<u32> {
+        (i < self.n_epochs).then(|| self.epochs[i].id)
+    }
+
+    /// Adjusted (or current) pose of the left camera of slot `i`, object coordinates.
+    pub fn epoch_pose(&self, i: usize) -> Option<Pose> {
+        if i >= self.n_epochs {
+            return None;
+        }
+        let mut p = self.epochs[i].params;
+        for a in 0..3 {
+            p[3 + a] += self.origin[a];
+        }
+        Some(Pose::from_params(&p))
+    }
+
+    /// Standard deviations of slot `i` (omega, phi, kappa rad; X, Y, Z m) from the last solution.
+    pub fn epoch_std(&self, i: usize) -> Option<[f64; 6]> {
+        if i >= self.n_epochs || self.epochs[i].flags & EP_COV == 0 {
+            return None;
+        }
+        let c = &self.epochs[i].cov;
+        let mut s = [0.0; 6];
+        for (k, sk) in s.iter_mut().enumerate() {
+            *sk = libm::sqrt(c[k * 6 + k].max(0.0));
+        }
+        Some(s)
+    }
+
+    /// 6x6 covariance (row-major) of slot `i` from the last solution (sigma0^2 scaled).
+    pub fn epoch_covariance(&self, i: usize) -> Option<[f64; 36]> {
+        (i < self.n_epochs && self.epochs[i].flags & EP_COV != 0).then(|| self.epochs[i].cov)
+    }
+
+    /// Adjusted point in object coordinates; `None` when unknown or excluded.
+    pub fn point(&self, point: u32) -> Option<[f64; 3]> {
+        let p = self.point_slot(point).ok()?;
+        let s = &self.points[p];
+        if s.flags & PT_EXCLUDED != 0 {
+            return None;
+        }
+        Some([
+            s.xyz[0] + self.origin[0],
+            s.xyz[1] + self.origin[1],
+            s.xyz[2] + self.origin[2],
+        ])
+    }
+
+    /// Standard deviations of a point, metres.
+    pub fn point_std(&self, point: u32) -> Option<[f64; 3]> {
+        let p = self.point_slot(point).ok()?;
+        (self.points[p].flags & PT_EXCLUDED == 0).then(|| self.points[p].std)
+    }
+
+    /// Whether a point was left out of the last solution.
+    pub fn point_excluded(&self, point: u32) -> bool {
+        self.point_slot(point)
+            .map(|p| self.points[p].flags & PT_EXCLUDED != 0)
+            .unwrap_or(true)
+    }
+
+    pub fn rig(&self) -> RigParams {
+        self.rig
+    }
+
+    /// Standard deviations of the rig parameters (zero when fixed).
+    pub fn rig_std(&self) -> [f64; 6] {
+        self.rig_std
+    }
+
+    pub fn observations(&self) -> &[Observation] {
+        &self.obs[..self.n_obs]
+    }
+
+    /// Observations flagged as blunders, with their indices.
+    pub fn flagged(&self) -> impl Iterator<Item = (usize, &Observation)> {
+        self.observations()
+            .iter()
+            .enumerate()
+            .filter(|(_, o)| o.is_flagged())
+    }
+
+    /// Residuals `observed - computed` (mm) of an observation at the current state.
+    pub fn residual(&self, index: usize) -> Option<[f64; 2]> {
+        let o = self.obs.get(index).filter(|_| index < self.n_obs)?;
+        let slot = self.slot_of(o.epoch)?;
+        let pose = Pose::from_params(&self.epochs[slot].params);
+        let cam = Camera::from_index(o.camera)?;
+        let pr = project_rig(
+            &pose,
+            &self.rig,
+            cam,
+            self.focal[o.camera as usize],
+            &self.points[o.point as usize].xyz,
+        )
+        .ok()?;
+        Some([o.xy[0] - pr.xy[0], o.xy[1] - pr.xy[1]])
+    }
+
+    /// Items refused because a capacity was full: (points, observations).
+    pub fn dropped(&self) -> (usize, usize) {
+        (self.dropped_points, self.dropped_observations)
+    }
+
+    /// Slot of the epoch found undetermined by the last failed solution.
+    pub fn singular_epoch(&self) -> Option<usize> {
+        self.singular_epoch
+    }
+
+    /// The window's local origin (object coordinates).
+    pub fn origin(&self) -> [f64; 3] {
+        self.origin
+    }
+
+    // ----- sliding -----
+
+    /// Drops the oldest epoch (fixed at its current pose): its observations
+    /// leave, points left without observations are freed, and the new oldest
+    /// epoch gets its current pose and covariance as a prior. The origin moves
+    /// to the new oldest epoch. Returns the dropped epoch's final pose.
+    pub fn slide(&mut self) -> Result<Pose, AdjustError> {
+        if self.n_epochs < 2 {
+            return Err(AdjustError::TooFewEpochs);
+        }
+        let dropped = self.epoch_pose(0).ok_or(AdjustError::TooFewEpochs)?;
+        let gone = self.epochs[0].id;
+        let mut k = 0;
+        for i in 0..self.n_obs {
+            let o = self.obs[i];
+            if o.epoch == gone {
+                let p = &mut self.points[o.point as usize];
+                p.nobs = p.nobs.saturating_sub(1);
+                if p.nobs == 0 && p.flags & PT_PRIOR == 0 {
+                    p.flags = 0;
+                }
+            } else {
+                self.obs[k] = o;
+                k += 1;
+            }
+        }
+        self.n_obs = k;
+        // Prior of the new first epoch from its marginal covariance.
+        let next = &mut self.epochs[1];
+        let mut info = [0.0; 36];
+        let have = next.flags & EP_COV != 0 && invert6(&next.cov, &mut info);
+        if !have {
+            let s = self.cfg.sigmas;
+            for i in 0..6 {
+                let sig = if i < 3 {
+                    s.datum_angle_rad
+                } else {
+                    s.datum_position_m
+                };
+                info[i * 6 + i] = 1.0 / (sig * sig);
+            }
+        }
+        next.prior = next.params;
+        next.prior_info = info;
+        next.flags |= EP_PRIOR;
+        next.flags &= !EP_ODOMETER; // its odometer leg led to the dropped epoch
+        self.epochs.copy_within(1..self.n_epochs, 0);
+        self.n_epochs -= 1;
+        self.first_id += 1;
+        let shift = [
+            self.epochs[0].params[3],
+            self.epochs[0].params[4],
+            self.epochs[0].params[5],
+        ];
+        self.recentre(shift);
+        Ok(dropped)
+    }
+
+    /// Moves the local origin by `shift` (local coordinates).
+    fn recentre(&mut self, shift: [f64; 3]) {
+        for a in 0..3 {
+            self.origin[a] += shift[a];
+        }
+        for e in self.epochs[..self.n_epochs].iter_mut() {
+            for a in 0..3 {
+                e.params[3 + a] -= shift[a];
+                e.prior[3 + a] -= shift[a];
+                e.gnss[a] -= shift[a];
+            }
+        }
+        for p in self.points[..self.n_point_slots].iter_mut() {
+            for a in 0..3 {
+                p.xyz[a] -= shift[a];
+                p.prior[a] -= shift[a];
+            }
+        }
+    }
+
+    // ----- the solver -----
+
+    fn rig_block(&self) -> Option<usize> {
+        self.cfg.estimate_rig.then_some(self.n_epochs)
+    }
+
+    fn n_cam(&self) -> usize {
+        6 * (self.n_epochs + self.cfg.estimate_rig as usize)
+    }
+
+    /// Groups the observations by point (counting sort).
+    fn build_index(&mut self) {
+        let np = self.n_point_slots;
+        self.point_start[..np + 1].fill(0);
+        for o in &self.obs[..self.n_obs] {
+            self.point_start[o.point as usize + 1] += 1;
+        }
+        for p in 0..np {
+            self.point_start[p + 1] += self.point_start[p];
+        }
+        // Fill using point_start as moving cursors, then restore.
+        for i in 0..self.n_obs {
+            let p = self.obs[i].point as usize;
+            let at = self.point_start[p] as usize;
+            self.obs_order[at] = i as u32;
+            self.point_start[p] += 1;
+        }
+        for p in (1..=np).rev() {
+            self.point_start[p] = self.point_start[p - 1];
+        }
+        self.point_start[0] = 0;
+    }
+
+    /// Builds point `p`'s blocks from its observations with weight factors
+    /// (`rig`/`scratch` filled for the touched camera blocks). Returns `None`
+    /// when the point has no usable observation.
+    fn point_blocks(&mut self, p: usize, want_cam: bool) -> (PointBlocks, f64, usize) {
+        self.point_blocks_with(p, want_cam, false)
+    }
+
+    /// [`Self::point_blocks`]; with `all` every observation counts with factor 1.
+    fn point_blocks_with(
+        &mut self,
+        p: usize,
+        want_cam: bool,
+        all: bool,
+    ) -> (PointBlocks, f64, usize) {
+        let mut v = Matrix3::<f64>::zeros();
+        let mut b = Vector3::<f64>::zeros();
+        let mut cost = 0.0;
+        let mut behind = 0;
+        let mut used = 0;
+        let mut touched = 0usize;
+        let xyz = self.points[p].xyz;
+        let rig_block = self.rig_block();
+        let (s0, s1) = (
+            self.point_start[p] as usize,
+            self.point_start[p + 1] as usize,
+        );
+        for k in s0..s1 {
+            let oi = self.obs_order[k] as usize;
+            let mut o = self.obs[oi];
+            if all {
+                o.factor = 1.0;
+            }
+            if !(o.factor > 0.0) {
+                continue;
+            }
+            let Some(slot) = self.slot_of(o.epoch) else {
+                continue;
+            };
+            let cam = if o.camera == 0 {
+                Camera::Left
+            } else {
+                Camera::Right
+            };
+            let pose = Pose::from_params(&self.epochs[slot].params);
+            let pr = match project_rig(&pose, &self.rig, cam, self.focal[o.camera as usize], &xyz) {
+                Ok(pr) => pr,
+                Err(_) => {
+                    self.obs[oi].flags |= Observation::BEHIND;
+                    behind += 1;
+                    continue;
+                }
+            };
+            self.obs[oi].flags &= !Observation::BEHIND;
+            used += 1;
+            let r = [o.xy[0] - pr.xy[0], o.xy[1] - pr.xy[1]];
+            let wt = [o.weight[0] * o.factor, o.weight[1] * o.factor];
+            for c in 0..2 {
+                cost += wt[c] * r[c] * r[c];
+                let jp = &pr.d_point[c];
+                for i in 0..3 {
+                    b[i] += wt[c] * jp[i] * r[c];
+                    for j in 0..3 {
+                        v[(i, j)] += wt[c] * jp[i] * jp[j];
+                    }
+                }
+            }
+            if !want_cam {
+                continue;
+            }
+            // Camera blocks touched by this observation: its epoch, and the rig.
+            let blocks = [
+                Some(slot),
+                if cam == Camera::Right {
+                    rig_block
+                } else {
+                    None
+                },
+            ];
+            for (which, blk) in blocks.iter().enumerate() {
+                let Some(blk) = *blk else { continue };
+                let sidx = if which == 0 { blk } else { self.cfg.window };
+                if !self.touched[..touched].contains(&(sidx as u32)) {
+                    self.touched[touched] = sidx as u32;
+                    touched += 1;
+                    self.scratch[sidx] = BlockScratch::zeroed();
+                }
+                let jc = if which == 0 { &pr.d_pose } else { &pr.d_rig };
+                let sc = &mut self.scratch[sidx];
+                for c in 0..2 {
+                    for i in 0..6 {
+                        let wi = wt[c] * jc[c][i];
+                        sc.g[i] += wi * r[c];
+                        for j in 0..6 {
+                            sc.u[i * 6 + j] += wi * jc[c][j];
+                        }
+                        for j in 0..3 {
+                            sc.w[i * 3 + j] += wi * pr.d_point[c][j];
+                        }
+                    }
+                }
+                if which == 0 && cam == Camera::Right && rig_block.is_some() {
+                    // Cross block epoch x rig: J_pose^T W J_rig.
+                    let sc = &mut self.scratch[sidx];
+                    for c in 0..2 {
+                        for i in 0..6 {
+                            let wi = wt[c] * pr.d_pose[c][i];
+                            for j in 0..6 {
+                                sc.u_rig[i * 6 + j] += wi * pr.d_rig[c][j];
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let pt = &self.points[p];
+        if pt.flags & PT_PRIOR != 0 {
+            let wp = 1.0 / (pt.prior_sigma * pt.prior_sigma);
+            for i in 0..3 {
+                let r = pt.prior[i] - pt.xyz[i];
+                v[(i, i)] += wp;
+                b[i] += wp * r;
+                cost += wp * r * r;
+            }
+        }
+        (
+            PointBlocks {
+                v,
+                b,
+                used,
+                touched,
+            },
+            cost,
+            behind,
+        )
+    }
+
+    /// Builds and solves the damped system and applies the step; on a
+    /// singular system returns the slot of the undetermined epoch.
+    fn step(&mut self, lambda: f64) -> Result<(), usize> {
+        let nc = self.n_cam();
+        let rig_block = self.rig_block();
+        self.build(lambda);
+        for i in 0..nc {
+            self.reduced[i * nc + i] *= 1.0 + lambda;
+        }
+        cholesky::factor(&mut self.reduced[..nc * nc], nc, cholesky::PIVOT_REL_TOL)
+            .map_err(|e| e.row / 6)?;
+        cholesky::solve(&self.reduced[..nc * nc], nc, &mut self.rhs[..nc]);
+        self.back_substitute(lambda);
+        for e in 0..self.n_epochs {
+            for i in 0..6 {
+                self.epochs[e].params[i] += self.rhs[6 * e + i];
+            }
+        }
+        if let Some(rb) = rig_block {
+            let mut r = self.rig.to_array();
+            for (i, ri) in r.iter_mut().enumerate() {
+                *ri += self.rhs[6 * rb + i];
+            }
+            self.rig = RigParams::from_array(&r);
+        }
+        Ok(())
+    }
+
+    /// The reduced camera system `S dc = rhs` (lower triangle, undamped
+    /// camera diagonal, points damped by `lambda`) into `reduced` and `rhs`.
+    fn build(&mut self, lambda: f64) {
+        let nc = self.n_cam();
+        let rig_block = self.rig_block();
+        self.reduced[..nc * nc].fill(0.0);
+        self.rhs[..nc].fill(0.0);
+        for p in 0..self.n_point_slots {
+            if self.points[p].flags & PT_USED == 0 {
+                continue;
+            }
+            let (pb, _, _) = self.point_blocks(p, true);
+            let Some(vinv) = self.usable_point(p, &pb, lambda) else {
+                continue;
+            };
+            for ti in 0..pb.touched {
+                let a = self.touched[ti] as usize;
+                let ba = if a == self.cfg.window {
+                    rig_block.unwrap_or(0)
+                } else {
+                    a
+                };
+                let sa = self.scratch[a];
+                // U, gradient, and the cross block with the rig.
+                for i in 0..6 {
+                    self.rhs[6 * ba + i] += sa.g[i];
+                    for j in 0..6 {
+                        self.reduced[(6 * ba + i) * nc + 6 * ba + j] += sa.u[i * 6 + j];
+                    }
+                }
+                if let (Some(rb), true) = (rig_block, a != self.cfg.window) {
+                    for i in 0..6 {
+                        for j in 0..6 {
+                            // Row rig param i, column epoch param j: (J_pose^T W J_rig)^T.
+                            self.reduced[(6 * rb + i) * nc + 6 * ba + j] += sa.u_rig[j * 6 + i];
+                        }
+                    }
+                }
+                // W_a V^-1 (6x3), then -W_a V^-1 W_b^T for blocks b <= a, and -W_a V^-1 b.
+                let wa = nalgebra::Matrix6x3::from_row_slice(&sa.w);
+                let wav = wa * vinv;
+                let g = wav * pb.b;
+                for i in 0..6 {
+                    self.rhs[6 * ba + i] -= g[i];
+                }
+                for tj in 0..pb.touched {
+                    let bidx = self.touched[tj] as usize;
+                    let bb = if bidx == self.cfg.window {
+                        rig_block.unwrap_or(0)
+                    } else {
+                        bidx
+                    };
+                    if bb > ba {
+                        continue;
+                    }
+                    let wb = nalgebra::Matrix6x3::from_row_slice(&self.scratch[bidx].w);
+                    let m = wav * wb.transpose();
+                    for i in 0..6 {
+                        for j in 0..6 {
+                            self.reduced[(6 * ba + i) * nc + 6 * bb + j] -= m[(i, j)];
+                        }
+                    }
+                }
+            }
+        }
+        self.add_constraints(true);
+    }
+
+    /// Point steps `dp = V^-1 (b_p - W^T dc)` with the camera step in `rhs`, applied.
+    fn back_substitute(&mut self, lambda: f64) {
+        let rig_block = self.rig_block();
+        for p in 0..self.n_point_slots {
+            if self.points[p].flags & (PT_USED | PT_EXCLUDED) != PT_USED {
+                continue;
+            }
+            let (pb, _, _) = self.point_blocks(p, true);
+            let Some(vinv) = self.usable_point(p, &pb, lambda) else {
+                continue;
+            };
+            let mut rhs = pb.b;
+            for ti in 0..pb.touched {
+                let a = self.touched[ti] as usize;
+                let ba = if a == self.cfg.window {
+                    rig_block.unwrap_or(0)
+                } else {
+                    a
+                };
+                let wa = nalgebra::Matrix6x3::from_row_slice(&self.scratch[a].w);
+                let dc = nalgebra::Vector6::from_column_slice(&self.rhs[6 * ba..6 * ba + 6]);
+                rhs -= wa.transpose() * dc;
+            }
+            let dp = vinv * rhs;
+            for i in 0..3 {
+                self.points[p].xyz[i] += dp[i];
+            }
+        }
+    }
+
+    /// Decides which points take part (two rays or more, not at infinity)
+    /// before an iteration sequence, so costs compare like with like.
+    fn classify_points(&mut self) {
+        for p in 0..self.n_point_slots {
+            if self.points[p].flags & PT_USED == 0 {
+                continue;
+            }
+            self.points[p].flags &= !PT_EXCLUDED;
+            let (pb, _, _) = self.point_blocks(p, false);
+            let _ = self.usable_point(p, &pb, 0.0);
+        }
+    }
+
+    /// Damped inverse of a point's `V`, or `None` (point excluded) when it has
+    /// fewer than two rays or is at infinity.
+    fn usable_point(&mut self, p: usize, pb: &PointBlocks, lambda: f64) -> Option<Matrix3<f64>> {
+        let has_prior = self.points[p].flags & PT_PRIOR != 0;
+        let ok_count = pb.used >= 2 || (has_prior && pb.used >= 1);
+        let inv = if ok_count { sym3_inverse(&pb.v) } else { None };
+        match inv {
+            Some(_) => {
+                self.points[p].flags &= !PT_EXCLUDED;
+                let mut v = pb.v;
+                for i in 0..3 {
+                    v[(i, i)] *= 1.0 + lambda;
+                }
+                v.try_inverse()
+            }
+            None => {
+                self.points[p].flags |= PT_EXCLUDED;
+                None
+            }
+        }
+    }
+
+    /// Adds the camera constraints to the reduced system (when `normal`) and
+    /// returns their `vTPv` and equation count.
+    fn add_constraints(&mut self, normal: bool) -> (f64, usize) {
+        let nc = self.n_cam();
+        let mut cost = 0.0;
+        let mut count = 0;
+        let s = self.cfg.sigmas;
+        // Pose priors (datum, carried prior) with full information.
+        for e in 0..self.n_epochs {
+            let ep = self.epochs[e];
+            if ep.flags & EP_PRIOR == 0 {
+                continue;
+            }
+            let r = prior_residual(&ep.params, &ep.prior);
+            count += 6;
+            for i in 0..6 {
+                let mut ir = 0.0;
+                for j in 0..6 {
+                    ir += ep.prior_info[i * 6 + j] * r[j];
+                    if normal {
+                        self.reduced[(6 * e + i) * nc + 6 * e + j] += ep.prior_info[i * 6 + j];
+                    }
+                }
+                cost += r[i] * ir;
+                if normal {
+                    self.rhs[6 * e + i] -= ir;
+                }
+            }
+        }
+        if let Some(rb) = self.rig_block() {
+            let r = prior_residual(&self.rig.to_array(), &self.rig_prior.to_array());
+            for (i, ri) in r.iter().enumerate() {
+                let sig = if i < 3 { s.rig_angle_rad } else { s.rig_base_m };
+                cost += self.row(normal, &[(6 * rb + i, 1.0)], *ri, 1.0 / (sig * sig));
+            }
+            count += 6;
+            if s.base_length_m > 0.0 {
+                let (e, g) = base_length(&self.rig.base, self.nominal_base);
+                let w = 1.0 / (s.base_length_m * s.base_length_m);
+                cost += self.row(
+                    normal,
+                    &[(6 * rb + 3, g[0]), (6 * rb + 4, g[1]), (6 * rb + 5, g[2])],
+                    e,
+                    w,
+                );
+                count += 1;
+            }
+        }
+        for e in 0..self.n_epochs {
+            let ep = self.epochs[e];
+            let centres =
+                |k: usize| -> [f64; 3] { [0, 1, 2].map(|a| self.epochs[k].params[3 + a]) };
+            let (c0, c1, c2) = (
+                centres(e.saturating_sub(2)),
+                centres(e.saturating_sub(1)),
+                centres(e),
+            );
+            if ep.flags & EP_GNSS != 0 {
+                let w = 1.0 / (ep.gnss_sigma * ep.gnss_sigma);
+                for a in 0..3 {
+                    cost += self.row(
+                        normal,
+                        &[(6 * e + 3 + a, 1.0)],
+                        ep.params[3 + a] - ep.gnss[a],
+                        w,
+                    );
+                }
+                count += 3;
+            }
+            if ep.flags & EP_ODOMETER != 0 && e > 0 {
+                let (r, g) = distance(&c1, &c2, ep.odometer);
+                let w = 1.0 / (ep.odometer_sigma * ep.odometer_sigma);
+                let j = [
+                    (6 * (e - 1) + 3, -g[0]),
+                    (6 * (e - 1) + 4, -g[1]),
+                    (6 * (e - 1) + 5, -g[2]),
+                    (6 * e + 3, g[0]),
+                    (6 * e + 4, g[1]),
+                    (6 * e + 5, g[2]),
+                ];
+                cost += self.row(normal, &j, r, w);
+                count += 1;
+            }
+            if s.velocity_change_mps > 0.0 && e >= 2 {
+                let dt0 = self.epochs[e - 1].time - self.epochs[e - 2].time;
+                let dt1 = ep.time - self.epochs[e - 1].time;
+                if dt0 > 0.0 && dt1 > 0.0 {
+                    let (r, k) = smoothness([&c0, &c1, &c2], dt0, dt1);
+                    let w = 1.0 / (s.velocity_change_mps * s.velocity_change_mps);
+                    for a in 0..3 {
+                        let j = [
+                            (6 * (e - 2) + 3 + a, k[0]),
+                            (6 * (e - 1) + 3 + a, k[1]),
+                            (6 * e + 3 + a, k[2]),
+                        ];
+                        cost += self.row(normal, &j, r[a], w);
+                    }
+                    count += 3;
+                }
+            }
+        }
+        (cost, count)
+    }
+
+    /// One scalar constraint `e` with sparse gradient `j` (ascending indices) and weight `w`.
+    fn row(&mut self, normal: bool, j: &[(usize, f64)], e: f64, w: f64) -> f64 {
+        if normal {
+            let nc = self.n_cam();
+            for &(a, ca) in j {
+                self.rhs[a] -= w * ca * e;
+                for &(b, cb) in j {
+                    if b <= a {
+                        self.reduced[a * nc + b] += w * ca * cb;
+                    }
+                }
+            }
+        }
+        w * e * e
+    }
+
+    /// `vTPv` at the current state, constraints included.
+    fn cost(&mut self) -> (f64, usize) {
+        let mut cost = 0.0;
+        let mut behind = 0;
+        for p in 0..self.n_point_slots {
+            if self.points[p].flags & (PT_USED | PT_EXCLUDED) != PT_USED {
+                continue;
+            }
+            let (_, c, bh) = self.point_blocks(p, false);
+            cost += c;
+            behind += bh;
+        }
+        (cost + self.add_constraints(false).0, behind)
+    }
+
+    fn save(&mut self) {
+        let nc = self.n_cam();
+        for e in 0..self.n_epochs {
+            self.saved_cam[6 * e..6 * e + 6].copy_from_slice(&self.epochs[e].params);
+        }
+        if let Some(rb) = self.rig_block() {
+            self.saved_cam[6 * rb..6 * rb + 6].copy_from_slice(&self.rig.to_array());
+        }
+        let _ = nc;
+        for p in 0..self.n_point_slots {
+            self.saved_points[3 * p..3 * p + 3].copy_from_slice(&self.points[p].xyz);
+        }
+    }
+
+    fn restore(&mut self) {
+        for e in 0..self.n_epochs {
+            self.epochs[e]
+                .params
+                .copy_from_slice(&self.saved_cam[6 * e..6 * e + 6]);
+        }
+        if let Some(rb) = self.rig_block() {
+            let mut r = [0.0; 6];
+            r.copy_from_slice(&self.saved_cam[6 * rb..6 * rb + 6]);
+            self.rig = RigParams::from_array(&r);
+        }
+        for p in 0..self.n_point_slots {
+            self.points[p]
+                .xyz
+                .copy_from_slice(&self.saved_points[3 * p..3 * p + 3]);
+        }
+    }
+
+    /// Levenberg-Marquardt to convergence with the current weight factors.
+    /// Returns (iterations, converged).
+    fn least_squares(&mut self, max_iter: usize) -> Result<(usize, bool), AdjustError> {
+        self.classify_points();
+        let mut lambda = 1e-6;
+        let (mut cost, _) = self.cost();
+        let mut iterations = 0;
+        let mut converged = false;
+        while iterations < max_iter {
+            iterations += 1;
+            self.save();
+            match self.step(lambda) {
+                Ok(()) => {}
+                Err(slot) => {
+                    self.restore();
+                    lambda *= 100.0;
+                    if lambda > 1e6 {
+                        self.singular_epoch = Some(slot.min(self.n_epochs.saturating_sub(1)));
+                        return Err(AdjustError::Singular { epoch: slot });
+                    }
+                    continue;
+                }
+            }
+            let (new_cost, _) = self.cost();
+            if new_cost.is_finite() && new_cost <= cost {
+                let decrease = cost - new_cost;
+                cost = new_cost;
+                lambda = (lambda * 0.1).max(1e-12);
+                if decrease <= self.cfg.tolerance * cost.max(1e-300) {
+                    converged = true;
+                    break;
+                }
+            } else {
+                self.restore();
+                if new_cost.is_finite() && (new_cost - cost) <= 1e-13 * cost.max(1e-300) {
+                    // No representable improvement left: at the minimum.
+                    converged = true;
+                    break;
+                }
+                lambda *= 10.0;
+                if lambda > 1e10 {
+                    converged = true;
+                    break;
+                }
+            }
+        }
+        Ok((iterations, converged))
+    }
+
+    /// Adjusts the window: least squares with the robust treatment of the
+    /// configuration, then the quality figures and standard deviations.
+    pub fn solve(&mut self) -> Result<Report, AdjustError> {
+        if self.n_epochs == 0 {
+            return Err(AdjustError::TooFewEpochs);
+        }
+        self.singular_epoch = None;
+        self.build_index();
+        for o in self.obs[..self.n_obs].iter_mut() {
+            o.factor = 1.0;
+            o.flags = 0;
+        }
+        for p in self.points[..self.n_point_slots].iter_mut() {
+            p.flags &= !PT_EXCLUDED;
+        }
+        let mut report = Report::default();
+        let max_it = self.cfg.max_iterations;
+        match self.cfg.robust {
+            Robust::None => {
+                let (it, conv) = self.least_squares(max_it)?;
+                report.iterations += it;
+                report.converged = conv;
+            }
+            Robust::SeedReweight { threshold_mm } => {
+                let (it, _) = self.least_squares(max_it)?;
+                report.iterations += it;
+                for i in 0..self.n_obs {
+                    if let Some(r) = self.residual(i) {
+                        if r[0].abs() > threshold_mm {
+                            let o = &mut self.obs[i];
+                            o.weight = [SEED_REWEIGHT, SEED_REWEIGHT];
+                            o.flags |= Observation::FLAGGED;
+                        }
+                    }
+                }
+                let (it, conv) = self.least_squares(max_it)?;
+                report.iterations += it;
+                report.converged = conv;
+                report.robust_rounds = 1;
+            }
+            Robust::Snooping { critical } => {
+                // Cauchy re-weighting on a median scale: blunders lose their pull.
+                for _ in 0..self.cfg.max_robust_rounds {
+                    let (it, _) = self.least_squares(max_it.min(10))?;
+                    report.iterations += it;
+                    let change = self.cauchy_factors();
+                    report.robust_rounds += 1;
+                    if change < 0.01 {
+                        break;
+                    }
+                }
+                // Data snooping with full weights until the excluded set is stable.
+                for o in self.obs[..self.n_obs].iter_mut() {
+                    o.factor = 1.0;
+                }
+                self.snoop(critical, 0);
+                let mut stable = false;
+                for round in 1..=self.cfg.max_robust_rounds {
+                    let (it, conv) = self.least_squares(max_it)?;
+                    report.iterations += it;
+                    report.converged = conv;
+                    report.robust_rounds += 1;
+                    if !self.snoop(critical, round) {
+                        stable = true;
+                        break;
+                    }
+                }
+                if !stable {
+                    // Out of rounds: the solution must match the final set.
+                    let (it, conv) = self.least_squares(max_it)?;
+                    report.iterations += it;
+                    report.converged = conv;
+                }
+            }
+        }
+        self.quality(&mut report)?;
+        Ok(report)
+    }
+
+    /// Standardised 2-D residual `sqrt(v^T P v)` of every observation into `residuals`.
+    fn normalised_residuals(&mut self) {
+        for i in 0..self.n_obs {
+            let w = self.obs[i].weight;
+            self.residuals[i] = match self.residual(i) {
+                Some(r) => libm::sqrt(w[0] * r[0] * r[0] + w[1] * r[1] * r[1]),
+                None => f64::INFINITY,
+            };
+        }
+    }
+
+    /// Sets Cauchy factors from the residuals; returns the largest factor change.
+    fn cauchy_factors(&mut self) -> f64 {
+        self.normalised_residuals();
+        let n = self.n_obs;
+        // Median of t^2 over chi2_2's median: the robust variance factor.
+        for i in 0..n {
+            self.work[i] = self.residuals[i] * self.residuals[i];
+        }
+        let scale2 = (median(&mut self.work[..n]) / CHI2_2_MEDIAN).max(1e-30);
+        let scale = libm::sqrt(scale2);
+        let mut change: f64 = 0.0;
+        for i in 0..n {
+            let f = cauchy_factor(self.residuals[i] / scale, 2.385);
+            change = change.max((f - self.obs[i].factor).abs());
+            self.obs[i].factor = f;
+        }
+        change
+    }
+
+    /// Tests every observation with `T = v^T Q_vv^-1 v`, `Q_vv = P^-1 -+ J_p V^-1 J_p^T`
+    /// (point part of the cofactor: the cameras are determined by many points),
+    /// on the median scale; excludes those beyond `critical`. Returns whether
+    /// the excluded set changed.
+    fn snoop(&mut self, critical: f64, round: usize) -> bool {
+        // Statistic per observation into residuals[].
+        for p in 0..self.n_point_slots {
+            if self.points[p].flags & PT_USED == 0 {
+                continue;
+            }
+            let (pb, _, _) = self.point_blocks(p, false);
+            let mut vinv = if pb.used >= 2 {
+                sym3_inverse(&pb.v)
+            } else {
+                None
+            };
+            // A point left with fewer than two rays is re-tested as if all
+            // its observations were in, so a wrongly excluded point can return.
+            let all = vinv.is_none();
+            if all {
+                let (pb, _, _) = self.point_blocks_with(p, false, true);
+                vinv = if pb.used >= 2 {
+                    sym3_inverse(&pb.v)
+                } else {
+                    None
+                };
+            }
+            let (s0, s1) = (
+                self.point_start[p] as usize,
+                self.point_start[p + 1] as usize,
+            );
+            for k in s0..s1 {
+                let oi = self.obs_order[k] as usize;
+                self.residuals[oi] = self.statistic(oi, vinv.as_ref(), all);
+            }
+        }
+        let n = self.n_obs;
+        let mut m = 0;
+        for i in 0..n {
+            if self.obs[i].factor > 0.0 && self.residuals[i].is_finite() {
+                self.work[m] = self.residuals[i];
+                m += 1;
+            }
+        }
+        // Median scale: 1 when the weights match the noise, and right also
+        // with the seed's weights whose scale is arbitrary.
+        let scale2 = (median(&mut self.work[..m]) / CHI2_2_MEDIAN).max(1e-30);
+        let mut changed = false;
+        for i in 0..n {
+            let t = self.residuals[i] / scale2;
+            let was = self.obs[i].factor == 0.0;
+            // Hysteresis from the third round: an excluded observation returns
+            // only well inside the acceptance region, so the set cannot oscillate.
+            let readmit = if round >= 3 { 0.5 * critical } else { critical };
+            let out = if was {
+                !(t <= readmit)
+            } else {
+                !(t <= critical)
+            };
+            if out != was {
+                changed = true;
+            }
+            self.obs[i].factor = if out { 0.0 } else { 1.0 };
+            if out {
+                self.obs[i].flags |= Observation::FLAGGED;
+            } else {
+                self.obs[i].flags &= !Observation::FLAGGED;
+            }
+        }
+        changed
+    }
+
+    /// `T` of observation `oi` (0 when untestable).
+    fn statistic(&self, oi: usize, vinv: Option<&Matrix3<f64>>, all: bool) -> f64 {
+        let o = &self.obs[oi];
+        let Some(vinv) = vinv else { return 0.0 };
+        let Some(slot) = self.slot_of(o.epoch) else {
+            return 0.0;
+        };
+        let cam = if o.camera == 0 {
+            Camera::Left
+        } else {
+            Camera::Right
+        };
+        let pose = Pose::from_params(&self.epochs[slot].params);
+        let xyz = self.points[o.point as usize].xyz;
+        let Ok(pr) = project_rig(&pose, &self.rig, cam, self.focal[o.camera as usize], &xyz) else {
+            return f64::INFINITY;
+        };
+        let r = [o.xy[0] - pr.xy[0], o.xy[1] - pr.xy[1]];
+        let j = nalgebra::Matrix2x3::new(
+            pr.d_point[0][0],
+            pr.d_point[0][1],
+            pr.d_point[0][2],
+            pr.d_point[1][0],
+            pr.d_point[1][1],
+            pr.d_point[1][2],
+        );
+        let jq = j * vinv * j.transpose();
+        let sign = if o.factor > 0.0 || all { -1.0 } else { 1.0 };
+        let q = nalgebra::Matrix2::new(1.0 / o.weight[0], 0.0, 0.0, 1.0 / o.weight[1]) + jq * sign;
+        // Untestable when the observation carries (almost) no redundancy.
+        if !(q[(0, 0)] > 1e-3 / o.weight[0]) || !(q[(1, 1)] > 1e-3 / o.weight[1]) {
+            return 0.0;
+        }
+        match q.try_inverse() {
+            Some(qi) => {
+                let v = nalgebra::Vector2::new(r[0], r[1]);
+                (v.transpose() * qi * v)[0].max(0.0)
+            }
+            None => 0.0,
+        }
+    }
+
+    /// sigma0, chi-square, redundancy, and standard deviations from the inverse
+    /// of the undamped reduced normal matrix (scaled by sigma0^2).
+    fn quality(&mut self, report: &mut Report) -> Result<(), AdjustError> {
+        let nc = self.n_cam();
+        let rig_block = self.rig_block();
+        let (obs_cost, behind) = self.cost();
+        let (_, n_constraints) = self.add_constraints(false);
+        let mut n_obs = 0;
+        let mut n_points = 0;
+        let mut n_point_priors = 0;
+        let mut excluded = 0;
+        for p in 0..self.n_point_slots {
+            let pt = self.points[p];
+            if pt.flags & PT_USED == 0 {
+                continue;
+            }
+            if pt.flags & PT_EXCLUDED != 0 {
+                excluded += 1;
+                continue;
+            }
+            n_points += 1;
+            if pt.flags & PT_PRIOR != 0 {
+                n_point_priors += 3;
+            }
+            let (s0, s1) = (
+                self.point_start[p] as usize,
+                self.point_start[p + 1] as usize,
+            );
+            for k in s0..s1 {
+                let o = &self.obs[self.obs_order[k] as usize];
+                if o.factor > 0.0
+                    && o.flags & Observation::BEHIND == 0
+                    && self.slot_of(o.epoch).is_some()
+                {
+                    n_obs += 1;
+                }
+            }
+        }
+        let equations = 2 * n_obs + n_constraints + n_point_priors;
+        let unknowns = nc + 3 * n_points;
+        report.observations = n_obs;
+        report.constraints = n_constraints + n_point_priors;
+        report.unknowns = unknowns;
+        report.behind = behind;
+        report.excluded_points = excluded;
+        report.cost = obs_cost;
+        report.flagged = self.obs[..self.n_obs]
+            .iter()
+            .filter(|o| o.is_flagged())
+            .count();
+        if equations <= unknowns {
+            return Err(AdjustError::NoRedundancy);
+        }
+        let dof = equations - unknowns;
+        report.redundancy = dof;
+        let s02 = obs_cost / dof as f64;
+        report.sigma0 = libm::sqrt(s02);
+        report.chi2 = ChiSquareTest::new(obs_cost, dof);
+
+        // Undamped reduced matrix, inverted in place: Q_cc.
+        self.step_matrix_only()?;
+        cholesky::invert_in_place(&mut self.reduced[..nc * nc], nc);
+        for e in 0..self.n_epochs {
+            let mut cov = [0.0; 36];
+            for i in 0..6 {
+                for j in 0..6 {
+                    cov[i * 6 + j] = s02 * self.reduced[(6 * e + i) * nc + 6 * e + j];
+                }
+            }
+            self.epochs[e].cov = cov;
+            self.epochs[e].flags |= EP_COV;
+        }
+        if let Some(rb) = rig_block {
+            for i in 0..6 {
+                self.rig_std[i] =
+                    libm::sqrt((s02 * self.reduced[(6 * rb + i) * nc + 6 * rb + i]).max(0.0));
+            }
+        }
+        // Points: Q_pp = V^-1 + V^-1 W^T Q_cc W V^-1.
+        for p in 0..self.n_point_slots {
+            if self.points[p].flags & (PT_USED | PT_EXCLUDED) != PT_USED {
+                continue;
+            }
+            let (pb, _, _) = self.point_blocks(p, true);
+            let Some(vinv) = sym3_inverse(&pb.v) else {
+                continue;
+            };
+            let mut q = vinv;
+            for ti in 0..pb.touched {
+                let a = self.touched[ti] as usize;
+                let ba = if a == self.cfg.window {
+                    rig_block.unwrap_or(0)
+                } else {
+                    a
+                };
+                let ga = nalgebra::Matrix6x3::from_row_slice(&self.scratch[a].w) * vinv;
+                for tj in 0..pb.touched {
+                    let b = self.touched[tj] as usize;
+                    let bb = if b == self.cfg.window {
+                        rig_block.unwrap_or(0)
+                    } else {
+                        b
+                    };
+                    let gb = nalgebra::Matrix6x3::from_row_slice(&self.scratch[b].w) * vinv;
+                    let qab = nalgebra::Matrix6::from_fn(|i, j| {
+                        self.reduced[(6 * ba + i) * nc + 6 * bb + j]
+                    });
+                    q += ga.transpose() * qab * gb;
+                }
+            }
+            for i in 0..3 {
+                self.points[p].std[i] = libm::sqrt((s02 * q[(i, i)]).max(0.0));
+            }
+        }
+        Ok(())
+    }
+
+    /// Builds the undamped reduced matrix and factors it (for the covariance).
+    fn step_matrix_only(&mut self) -> Result<(), AdjustError> {
+        // step() applies a step; build it with lambda = 0 on a saved state and
+        // put the state back: the matrix stays factored in `reduced`.
+        self.save();
+        let res = self.step(0.0);
+        self.restore();
+        res.map_err(|slot| {
+            self.singular_epoch = Some(slot.min(self.n_epochs.saturating_sub(1)));
+            AdjustError::Singular { epoch: slot }
+        })
+    }
+}
+
+/// Inverts a symmetric positive definite 6x6 (row-major); false when not SPD.
+fn invert6(a: &[f64; 36], out: &mut [f64; 36]) -> bool {
+    let mut m = *a;
+    if cholesky::factor(&mut m, 6, cholesky::PIVOT_REL_TOL).is_err() {
+        return false;
+    }
+    cholesky::invert_in_place(&mut m, 6);
+    *out = m;
+    out.iter().all(|v| v.is_finite())
+}
+
+#[cfg(test)]
+mod tests {
+    //! Internal checks: the assembled normal equations against numerical
+    //! gradients of `vTPv` (constraints and rig chain included).
+    extern crate std;
+    use super::*;
+    use crate::camera::Interior;
+    use std::vec;
+
+    /// Without points the reduced system is the full one: `rhs = -1/2 grad vTPv`.
+    #[test]
+    fn constraint_normal_equations_match_numerical_gradient() {
+        let cam = Interior::pinhole_px(1000, 800, 900.0);
+        let mut rig = Rig::rectified(cam, 0.5);
+        rig.relative_angles = [0.01, -0.02, 0.005];
+        rig.base_m = [0.5, 0.01, -0.02];
+        let cfg = AdjustConfig {
+            window: 4,
+            estimate_rig: true,
+            sigmas: ConstraintSigmas {
+                datum_angle_rad: 0.01,
+                datum_position_m: 0.01,
+                base_length_m: 0.002,
+                velocity_change_mps: 0.3,
+                ..ConstraintSigmas::default()
+            },
+            ..AdjustConfig::default()
+        };
+        let mut mem = vec![0u8; 1 << 20];
+        let mut arena = Arena::new(&mut mem);
+        let mut w = Window::new(cfg, &rig, &mut arena).unwrap();
+        w.set_base_length(0.49);
+        for k in 0..4 {
+            let pose = Pose::from_degrees(
+                90.0 + k as f64,
+                0.5 * k as f64,
+                -0.3,
+                [0.1 * k as f64, 1.1 * k as f64, 0.02],
+            );
+            let id = w
+                .add_epoch(&pose, 0.5 * k as f64 + 0.01 * (k * k) as f64)
+                .unwrap();
+            w.set_gnss(id, [0.05, 1.0 * k as f64, 0.0], 0.3).unwrap();
+            if k > 0 {
+                w.set_odometer(id, 1.0, 0.05).unwrap();
+            }
+        }
+        // Move away from the priors so every residual is non-zero.
+        w.epochs[0].params[0] += 0.001;
+        w.epochs[0].params[4] += 0.002;
+        w.rig = RigParams::from_array(&[0.012, -0.018, 0.004, 0.51, 0.012, -0.019]);
+        w.build_index();
+        w.build(0.0);
+        let nc = w.n_cam();
+        let rhs: std::vec::Vec<f64> = w.rhs[..nc].to_vec();
+        for i in 0..nc {
+            let h = 1e-6;
+            let (blk, k) = (i / 6, i % 6);
+            let val = |w: &mut Window, d: f64| {
+                if blk < w.n_epochs {
+                    w.epochs[blk].params[k] += d;
+                } else {
+                    let mut r = w.rig.to_array();
+                    r[k] += d;
+                    w.rig = RigParams::from_array(&r);
+                }
+            };
+            val(&mut w, h);
+            let cp = w.cost().0;
+            val(&mut w, -2.0 * h);
+            let cm = w.cost().0;
+            val(&mut w, h);
+            let num = -(cp - cm) / (2.0 * h) / 2.0;
+            let tol = 1e-5 * (1.0 + num.abs().max(rhs[i].abs()));
+            assert!(
+                (num - rhs[i]).abs() <= tol,
+                "param {i}: analytic {} numeric {num}",
+                rhs[i]
+            );
+        }
+    }
+}

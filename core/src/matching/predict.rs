@@ -1,0 +1,87 @@
+//! Motion-guided predictions for temporal matching: each stereo match of the previous
+//! epoch is triangulated in the previous left camera's frame and projected into the
+//! current left and right images with the predicted motion.
+//!
+//! Frame: the previous left camera is the identity pose (`M = I`, `C = 0`; x right,
+//! y up, z backward, so forward travel is along -z). `motion` is the current left
+//! camera's pose in that frame; [`relative_motion`] builds it from two object-frame poses.
+
+use super::config::NONE;
+use crate::camera::{project_to_pixel, Pose, Rig};
+use crate::features::Keypoint;
+use nalgebra::{Matrix3, Vector3};
+
+/// Pose of `cur` in the camera frame of `prev`: `M = M_cur M_prev^T`, `C = M_prev (C_cur - C_prev)`.
+pub fn relative_motion(prev: &Pose, cur: &Pose) -> Pose {
+    let mp = prev.rotation();
+    let m = cur.rotation() * mp.transpose();
+    let c = mp * (cur.centre_vec() - prev.centre_vec());
+    Pose::from_rotation(&m, [c[0], c[1], c[2]])
+}
+
+/// Midpoint triangulation of a stereo match in the left camera frame (metres);
+/// `None` when the rays are parallel or the point is not in front of both cameras.
+pub fn triangulate(rig: &Rig, left_px: [f64; 2], right_px: [f64; 2]) -> Option<Vector3<f64>> {
+    let [xl, yl] = rig.left.pixel_to_corrected(left_px[0], left_px[1]);
+    let [xr, yr] = rig.right.pixel_to_corrected(right_px[0], right_px[1]);
+    let dl = Vector3::new(xl, yl, -rig.left.focal_mm);
+    let mrel: Matrix3<f64> = rig.relative_rotation();
+    let dr = mrel.transpose() * Vector3::new(xr, yr, -rig.right.focal_mm);
+    let b = Vector3::from(rig.base_m);
+    // Closest points of 0 + s dl and b + u dr.
+    let (a11, a12, a22) = (dl.dot(&dl), -dl.dot(&dr), dr.dot(&dr));
+    let (r1, r2) = (dl.dot(&b), -dr.dot(&b));
+    let det = a11 * a22 - a12 * a12;
+    if det.is_nan() || det.abs() <= 1e-12 * a11 * a22 {
+        return None;
+    }
+    let s = (r1 * a22 - a12 * r2) / det;
+    let u = (a11 * r2 - a12 * r1) / det;
+    if !(s > 0.0 && u > 0.0) {
+        return None;
+    }
+    let p = (dl * s + b + dr * u) * 0.5;
+    p.iter().all(|v| v.is_finite()).then_some(p)
+}
+
+/// Fills `out_left[i]` (per previous left keypoint) and `out_right[j]` (per previous
+/// right keypoint) with the predicted current pixel positions of the stereo-matched
+/// keypoints (`stereo[i]` = right index or [`NONE`]); everything else gets NaN, which
+/// the temporal matcher treats as "no prediction". Returns the number of predictions.
+pub fn predict_positions(
+    rig: &Rig,
+    motion: &Pose,
+    prev_left: &[Keypoint],
+    prev_right: &[Keypoint],
+    stereo: &[u32],
+    out_left: &mut [[f32; 2]],
+    out_right: &mut [[f32; 2]],
+) -> usize {
+    out_left.fill([f32::NAN; 2]);
+    out_right.fill([f32::NAN; 2]);
+    let right_motion = rig.right_pose(motion);
+    let mut count = 0;
+    for (i, (&j, kl)) in stereo.iter().zip(prev_left).enumerate() {
+        if j == NONE || i >= out_left.len() {
+            continue;
+        }
+        let (Some(kr), true) = (prev_right.get(j as usize), (j as usize) < out_right.len()) else {
+            continue;
+        };
+        let Some(p) = triangulate(rig, [kl.x as f64, kl.y as f64], [kr.x as f64, kr.y as f64])
+        else {
+            continue;
+        };
+        let p = [p[0], p[1], p[2]];
+        let (Ok(l), Ok(r)) = (
+            project_to_pixel(motion, &rig.left, &p),
+            project_to_pixel(&right_motion, &rig.right, &p),
+        ) else {
+            continue;
+        };
+        out_left[i] = [l[0] as f32, l[1] as f32];
+        out_right[j as usize] = [r[0] as f32, r[1] as f32];
+        count += 1;
+    }
+    count
+}

@@ -1,0 +1,361 @@
+//! Stereo datasets on disk: the KITTI odometry layout and the photogrammetric
+//! `rig.toml` layout of DESIGN.md, "Dataset layouts".
+//!
+//! [`Dataset::open`] detects the layout, reads the calibration, pairs the left
+//! and right images epoch by epoch and checks every image header, so a
+//! malformed dataset fails at once with an error naming the file and the
+//! problem rather than in the middle of a run.
+mod error;
+mod image;
+pub mod kitti;
+pub mod rigfile;
+
+pub use error::DatasetError;
+pub use image::{image_size, load_gray, to_gray8, GrayImage};
+pub use rigfile::{default_datum, read_rig, rig_toml_text, write_rig};
+
+use crate::poses::{read_poses, KittiPose};
+use phototraverse_core::camera::{Pose, Rig};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// File name of the optional ground truth of a dataset (KITTI pose format).
+pub const GT_FILE: &str = "gt_poses.txt";
+/// File name of the optional epoch times (one number per line, seconds).
+pub const TIMES_FILE: &str = "times.txt";
+
+/// Image file extensions a dataset may use.
+const IMAGE_EXTENSIONS: &[&str] = &[
+    "png", "jpg", "jpeg", "pgm", "ppm", "pnm", "bmp", "tif", "tiff",
+];
+
+/// Which layout a dataset uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Layout {
+    /// `image_0/`, `image_1/`, `calib.txt`.
+    Kitti,
+    /// `left/`, `right/`, `rig.toml` (or seed-style `E001`/`D001` files).
+    Rig,
+}
+
+/// One synchronized stereo pair.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Epoch {
+    /// The name shared by the pair (e.g. `000012`, or `012` for `E012`/`D012`).
+    pub name: String,
+    pub left: PathBuf,
+    pub right: PathBuf,
+    /// Time from `times.txt`, seconds.
+    pub time: Option<f64>,
+}
+
+/// An opened dataset.
+#[derive(Debug, Clone)]
+pub struct Dataset {
+    pub dir: PathBuf,
+    pub layout: Layout,
+    /// The calibrated rig (photo units: mm for rig.toml, pixels for KITTI).
+    pub rig: Rig,
+    /// The datum: the left camera at epoch 0 (rig.toml `[datum]`, default omega 90 deg).
+    pub datum: Pose,
+    /// Epochs in order.
+    pub epochs: Vec<Epoch>,
+    /// Ground truth (`gt_poses.txt`), one pose per epoch.
+    pub ground_truth: Option<Vec<KittiPose>>,
+}
+
+impl Dataset {
+    /// Opens `dir`, detecting its layout.
+    pub fn open(dir: &Path) -> Result<Dataset, DatasetError> {
+        if dir.join("calib.txt").is_file() && dir.join("image_0").is_dir() {
+            Self::open_kitti(dir)
+        } else if dir.join("rig.toml").is_file() {
+            Self::open_rig(dir)
+        } else {
+            Err(DatasetError::UnknownLayout {
+                dir: dir.to_path_buf(),
+            })
+        }
+    }
+
+    fn open_kitti(dir: &Path) -> Result<Dataset, DatasetError> {
+        let calib_path = dir.join("calib.txt");
+        let text = read_text(&calib_path)?;
+        let (p0, p1) = kitti::parse_calib(&text, &calib_path)?;
+        let (left_dir, right_dir) = (dir.join("image_0"), dir.join("image_1"));
+        let pairs = pair_images(
+            &list_images(&left_dir)?,
+            &list_images(&right_dir)?,
+            &right_dir,
+        )?;
+        let first = pairs.first().ok_or_else(|| DatasetError::NoImages {
+            dir: left_dir.clone(),
+        })?;
+        let (w, h) = image_size(&first.1)?;
+        let reference = format!("size of {}", first.1.display());
+        check_sizes(&pairs, (w, h), (w, h), &reference)?;
+        let rig = kitti::rig_from_calib(&p0, &p1, w, h, &calib_path)?;
+        Self::finish(dir, Layout::Kitti, rig, default_datum(), pairs)
+    }
+
+    fn open_rig(dir: &Path) -> Result<Dataset, DatasetError> {
+        let (rig, datum) = read_rig(&dir.join("rig.toml"))?;
+        let (left_dir, right_dir) = (dir.join("left"), dir.join("right"));
+        let pairs = if left_dir.is_dir() || right_dir.is_dir() {
+            pair_images(
+                &list_images(&left_dir)?,
+                &list_images(&right_dir)?,
+                &right_dir,
+            )?
+        } else {
+            // Seed-style: E001.jpg (esquerda, left) and D001.jpg (direita, right) side by side.
+            let all = list_images(dir)?;
+            let pick = |prefix: char| -> Vec<PathBuf> {
+                all.iter()
+                    .filter(|p| stem(p).starts_with([prefix, prefix.to_ascii_lowercase()]))
+                    .cloned()
+                    .collect()
+            };
+            pair_images(&pick('E'), &pick('D'), dir)?
+        };
+        if pairs.is_empty() {
+            return Err(DatasetError::NoImages { dir: left_dir });
+        }
+        let size = |c: &phototraverse_core::camera::Interior| (c.width_px, c.height_px);
+        check_sizes(&pairs, size(&rig.left), size(&rig.right), "rig.toml")?;
+        Self::finish(dir, Layout::Rig, rig, datum, pairs)
+    }
+
+    fn finish(
+        dir: &Path,
+        layout: Layout,
+        rig: Rig,
+        datum: Pose,
+        pairs: Vec<(String, PathBuf, PathBuf)>,
+    ) -> Result<Dataset, DatasetError> {
+        let times_path = dir.join(TIMES_FILE);
+        let times = if times_path.is_file() {
+            Some(read_times(&times_path, pairs.len())?)
+        } else {
+            None
+        };
+        let gt_path = dir.join(GT_FILE);
+        let ground_truth = if gt_path.is_file() {
+            let gt = read_poses(&gt_path)?;
+            if gt.len() != pairs.len() {
+                return Err(DatasetError::CountMismatch {
+                    path: gt_path,
+                    found: gt.len(),
+                    expected: pairs.len(),
+                });
+            }
+            Some(gt)
+        } else {
+            None
+        };
+        let epochs = pairs
+            .into_iter()
+            .enumerate()
+            .map(|(i, (name, left, right))| Epoch {
+                name,
+                left,
+                right,
+                time: times.as_ref().map(|t| t[i]),
+            })
+            .collect();
+        Ok(Dataset {
+            dir: dir.to_path_buf(),
+            layout,
+            rig,
+            datum,
+            epochs,
+            ground_truth,
+        })
+    }
+
+    pub fn len(&self) -> usize {
+        self.epochs.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.epochs.is_empty()
+    }
+
+    /// Loads the left and right images of epoch `i` as 8-bit gray.
+    pub fn load_pair(&self, i: usize) -> Result<(GrayImage, GrayImage), DatasetError> {
+        let Some(e) = self.epochs.get(i) else {
+            return Err(DatasetError::NoImages {
+                dir: self.dir.clone(),
+            });
+        };
+        Ok((load_gray(&e.left)?, load_gray(&e.right)?))
+    }
+}
+
+fn read_text(path: &Path) -> Result<String, DatasetError> {
+    std::fs::read_to_string(path).map_err(|source| DatasetError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn stem(p: &Path) -> String {
+    p.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// Image files of a directory, sorted by name.
+fn list_images(dir: &Path) -> Result<Vec<PathBuf>, DatasetError> {
+    let entries = std::fs::read_dir(dir).map_err(|source| DatasetError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut files = Vec::new();
+    for entry in entries {
+        let path = entry
+            .map_err(|source| DatasetError::Io {
+                path: dir.to_path_buf(),
+                source,
+            })?
+            .path();
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+        if path.is_file() && IMAGE_EXTENSIONS.contains(&ext.as_str()) {
+            files.push(path);
+        }
+    }
+    files.sort();
+    Ok(files)
+}
+
+/// The epoch key of an image name: its last run of digits (`000012` -> `000012`,
+/// `E012` -> `012`, `left_0012` -> `0012`), or the whole stem when it has none.
+pub fn epoch_key(path: &Path) -> String {
+    let s = stem(path);
+    let bytes = s.as_bytes();
+    let end = bytes
+        .iter()
+        .rposition(|b| b.is_ascii_digit())
+        .map(|i| i + 1);
+    match end {
+        Some(end) => {
+            let start = bytes[..end]
+                .iter()
+                .rposition(|b| !b.is_ascii_digit())
+                .map_or(0, |i| i + 1);
+            s[start..end].to_string()
+        }
+        None => s,
+    }
+}
+
+/// Pairs left and right images by epoch key, in left-name order.
+fn pair_images(
+    left: &[PathBuf],
+    right: &[PathBuf],
+    right_dir: &Path,
+) -> Result<Vec<(String, PathBuf, PathBuf)>, DatasetError> {
+    let mut rights: BTreeMap<String, PathBuf> = BTreeMap::new();
+    for r in right {
+        let key = epoch_key(r);
+        if let Some(other) = rights.insert(key.clone(), r.clone()) {
+            return Err(DatasetError::DuplicateEpoch {
+                path: r.clone(),
+                epoch: key,
+                other,
+            });
+        }
+    }
+    let mut seen: BTreeMap<String, PathBuf> = BTreeMap::new();
+    let mut pairs = Vec::with_capacity(left.len());
+    for l in left {
+        let key = epoch_key(l);
+        if let Some(other) = seen.insert(key.clone(), l.clone()) {
+            return Err(DatasetError::DuplicateEpoch {
+                path: l.clone(),
+                epoch: key,
+                other,
+            });
+        }
+        let Some(r) = rights.remove(&key) else {
+            return Err(DatasetError::MissingRight {
+                path: l.clone(),
+                epoch: key,
+                right_dir: right_dir.to_path_buf(),
+            });
+        };
+        pairs.push((key, l.clone(), r));
+    }
+    if let Some((key, path)) = rights.into_iter().next() {
+        return Err(DatasetError::MissingLeft { path, epoch: key });
+    }
+    Ok(pairs)
+}
+
+/// Every image header must give the expected size.
+fn check_sizes(
+    pairs: &[(String, PathBuf, PathBuf)],
+    left: (u32, u32),
+    right: (u32, u32),
+    reference: &str,
+) -> Result<(), DatasetError> {
+    for (_, l, r) in pairs {
+        for (path, (ew, eh)) in [(l, left), (r, right)] {
+            let (w, h) = image_size(path)?;
+            if (w, h) != (ew, eh) {
+                return Err(DatasetError::SizeMismatch {
+                    path: path.clone(),
+                    got_w: w,
+                    got_h: h,
+                    expected_w: ew,
+                    expected_h: eh,
+                    reference: reference.to_string(),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// `times.txt`: one time per line, as many as epochs.
+fn read_times(path: &Path, expected: usize) -> Result<Vec<f64>, DatasetError> {
+    let text = read_text(path)?;
+    let mut times = Vec::with_capacity(expected);
+    for (i, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() {
+            continue;
+        }
+        let v: f64 = line.parse().map_err(|_| DatasetError::Times {
+            path: path.to_path_buf(),
+            line: i + 1,
+            problem: format!("`{line}` is not a number"),
+        })?;
+        times.push(v);
+    }
+    if times.len() != expected {
+        return Err(DatasetError::CountMismatch {
+            path: path.to_path_buf(),
+            found: times.len(),
+            expected,
+        });
+    }
+    Ok(times)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn epoch_keys() {
+        assert_eq!(epoch_key(Path::new("a/000012.png")), "000012");
+        assert_eq!(epoch_key(Path::new("E012.jpg")), "012");
+        assert_eq!(epoch_key(Path::new("D012.JPG")), "012");
+        assert_eq!(epoch_key(Path::new("left_0012_v2x.png")), "2");
+        assert_eq!(epoch_key(Path::new("abc.png")), "abc");
+    }
+}

@@ -1,0 +1,374 @@
+//! `report.html`: a self-contained page with SVG plots (plotters) and tables.
+use super::records::{MemoryLine, RunReport};
+use anyhow::{anyhow, Context, Result};
+use plotters::prelude::*;
+use std::fmt::Write as _;
+use std::path::Path;
+
+const SIZE: (u32, u32) = (720, 400);
+const PALETTE: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+];
+
+/// One named polyline of a chart.
+struct Series {
+    name: String,
+    points: Vec<(f64, f64)>,
+}
+
+fn bounds(series: &[Series], equal_aspect: bool) -> (std::ops::Range<f64>, std::ops::Range<f64>) {
+    let pts = series
+        .iter()
+        .flat_map(|s| s.points.iter())
+        .filter(|p| p.0.is_finite() && p.1.is_finite());
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for &(x, y) in pts {
+        x0 = x0.min(x);
+        x1 = x1.max(x);
+        y0 = y0.min(y);
+        y1 = y1.max(y);
+    }
+    if x0 > x1 {
+        return (0.0..1.0, 0.0..1.0);
+    }
+    let pad = |a: f64, b: f64| {
+        let m = ((b - a) * 0.05).max(1e-9);
+        (a - m, b + m)
+    };
+    let (mut xa, mut xb) = pad(x0, x1);
+    let (mut ya, mut yb) = pad(y0, y1);
+    if equal_aspect {
+        // Same metres per pixel on both axes, so a top view keeps its shape.
+        let scale = ((xb - xa) / SIZE.0 as f64).max((yb - ya) / SIZE.1 as f64);
+        let (cx, cy) = ((xa + xb) / 2.0, (ya + yb) / 2.0);
+        xa = cx - scale * SIZE.0 as f64 / 2.0;
+        xb = cx + scale * SIZE.0 as f64 / 2.0;
+        ya = cy - scale * SIZE.1 as f64 / 2.0;
+        yb = cy + scale * SIZE.1 as f64 / 2.0;
+    }
+    (xa..xb, ya..yb)
+}
+
+fn line_chart(title: &str, xl: &str, yl: &str, series: &[Series], equal: bool) -> Result<String> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| anyhow!("{e:?}"))?;
+        let (xr, yr) = bounds(series, equal);
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 18))
+            .margin(10)
+            .x_label_area_size(36)
+            .y_label_area_size(60)
+            .build_cartesian_2d(xr, yr)
+            .map_err(|e| anyhow!("{e:?}"))?;
+        chart
+            .configure_mesh()
+            .x_desc(xl)
+            .y_desc(yl)
+            .draw()
+            .map_err(|e| anyhow!("{e:?}"))?;
+        for (i, s) in series.iter().enumerate() {
+            let color = PALETTE[i % PALETTE.len()];
+            chart
+                .draw_series(LineSeries::new(
+                    s.points.iter().copied(),
+                    color.stroke_width(2),
+                ))
+                .map_err(|e| anyhow!("{e:?}"))?
+                .label(s.name.clone())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
+        }
+        if series.len() > 1 {
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()
+                .map_err(|e| anyhow!("{e:?}"))?;
+        }
+        root.present().map_err(|e| anyhow!("{e:?}"))?;
+    }
+    Ok(svg)
+}
+
+fn histogram(title: &str, xl: &str, values: &[f32], bins: usize, max: f64) -> Result<String> {
+    let mut counts = vec![0u32; bins];
+    for &v in values {
+        let b = ((v.abs() as f64 / max) * bins as f64) as usize;
+        if b < bins {
+            counts[b] += 1;
+        }
+    }
+    let top = counts.iter().copied().max().unwrap_or(0).max(1) as f64;
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| anyhow!("{e:?}"))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 18))
+            .margin(10)
+            .x_label_area_size(36)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..max, 0.0..top * 1.05)
+            .map_err(|e| anyhow!("{e:?}"))?;
+        chart
+            .configure_mesh()
+            .x_desc(xl)
+            .y_desc("count")
+            .draw()
+            .map_err(|e| anyhow!("{e:?}"))?;
+        let w = max / bins as f64;
+        chart
+            .draw_series(counts.iter().enumerate().map(|(i, &c)| {
+                let x = i as f64 * w;
+                Rectangle::new([(x, 0.0), (x + w, c as f64)], PALETTE[0].filled())
+            }))
+            .map_err(|e| anyhow!("{e:?}"))?;
+        root.present().map_err(|e| anyhow!("{e:?}"))?;
+    }
+    Ok(svg)
+}
+
+fn per_epoch(
+    report: &RunReport,
+    f: impl Fn(&super::EpochRecord) -> Option<f64>,
+) -> Vec<(f64, f64)> {
+    report
+        .epochs
+        .iter()
+        .filter_map(|e| f(e).map(|v| (e.epoch as f64, v)))
+        .collect()
+}
+
+/// Distance travelled along the ground truth at each epoch, and the estimate's
+/// position error as a percentage of it.
+fn drift_series(report: &RunReport) -> Option<Vec<(f64, f64)>> {
+    let gt = report.ground_truth.as_ref()?;
+    let mut dist = 0.0;
+    let mut out = Vec::new();
+    for (i, e) in report.epochs.iter().enumerate().take(gt.len()) {
+        if i > 0 {
+            let d: f64 = (0..3).map(|k| (gt[i][k] - gt[i - 1][k]).powi(2)).sum();
+            dist += d.sqrt();
+        }
+        if dist > 0.0 {
+            let err: f64 = [
+                e.left.x - gt[i][0],
+                e.left.y - gt[i][1],
+                e.left.z - gt[i][2],
+            ]
+            .iter()
+            .map(|v| v * v)
+            .sum::<f64>()
+            .sqrt();
+            out.push((dist, 100.0 * err / dist));
+        }
+    }
+    Some(out)
+}
+
+fn stage_series(report: &RunReport) -> Vec<Series> {
+    let mut names: Vec<&String> = report
+        .epochs
+        .iter()
+        .flat_map(|e| e.stage_ms.keys())
+        .collect();
+    names.sort();
+    names.dedup();
+    names
+        .into_iter()
+        .map(|n| Series {
+            name: n.clone(),
+            points: per_epoch(report, |e| e.stage_ms.get(n).copied()),
+        })
+        .collect()
+}
+
+fn memory_table(lines: &[MemoryLine]) -> String {
+    let mut t = String::from(
+        "<table><tr><th>component</th><th>kind</th><th>predicted (bytes)</th><th>measured (bytes)</th></tr>",
+    );
+    for l in lines {
+        let measured = l.measured_bytes.map_or("-".to_string(), |m| m.to_string());
+        let _ = write!(
+            t,
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            html_escape(&l.name),
+            html_escape(&l.kind),
+            l.predicted_bytes,
+            measured
+        );
+    }
+    t.push_str("</table>");
+    t
+}
+
+fn html_escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+}
+
+/// Writes `report.html` for `report` at `path`.
+pub fn write_html(path: &Path, report: &RunReport) -> Result<()> {
+    let mut trajectory = vec![Series {
+        name: "estimate (left camera)".into(),
+        points: report.epochs.iter().map(|e| (e.left.x, e.left.y)).collect(),
+    }];
+    if let Some(gt) = &report.ground_truth {
+        trajectory.push(Series {
+            name: "ground truth".into(),
+            points: gt.iter().map(|p| (p[0], p[1])).collect(),
+        });
+    }
+    let mut sections = vec![(
+        "Trajectory seen from above",
+        line_chart("Trajectory (top view)", "X (m)", "Y (m)", &trajectory, true)?,
+    )];
+    if let Some(drift) = drift_series(report) {
+        let s = [Series {
+            name: "position error / distance".into(),
+            points: drift,
+        }];
+        sections.push((
+            "Drift against distance",
+            line_chart("Drift", "distance (m)", "error (%)", &s, false)?,
+        ));
+    }
+    let sigma0 = [Series {
+        name: "sigma0".into(),
+        points: per_epoch(report, |e| e.sigma0),
+    }];
+    sections.push((
+        "sigma0 a posteriori",
+        line_chart("sigma0 per epoch", "epoch", "sigma0", &sigma0, false)?,
+    ));
+    let ties = [Series {
+        name: "tie points".into(),
+        points: per_epoch(report, |e| Some(e.tie_points as f64)),
+    }];
+    sections.push((
+        "Tie points",
+        line_chart("Tie points per epoch", "epoch", "count", &ties, false)?,
+    ));
+    if !report.residuals_px.is_empty() {
+        sections.push((
+            "Residuals",
+            histogram(
+                "Image residuals",
+                "|residual| (px)",
+                &report.residuals_px,
+                40,
+                2.0,
+            )?,
+        ));
+    }
+    let stages = stage_series(report);
+    if !stages.is_empty() {
+        sections.push((
+            "Time per stage",
+            line_chart("Time per stage", "epoch", "ms", &stages, false)?,
+        ));
+    }
+
+    let mut page = String::new();
+    let _ = write!(
+        page,
+        "<!doctype html><html><head><meta charset=\"utf-8\"><title>phototraverse report</title>\
+         <style>body{{font-family:sans-serif;max-width:780px;margin:auto}}\
+         table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:2px 6px;text-align:right}}</style>\
+         </head><body><h1>phototraverse: {}</h1><p>mode {}, {} epochs of {}x{} px, {} flagged.</p>",
+        html_escape(&report.dataset),
+        html_escape(&report.mode),
+        report.epochs.len(),
+        report.image_width,
+        report.image_height,
+        report.flagged_epochs()
+    );
+    if let Some(ev) = &report.evaluation {
+        let _ = write!(
+            page,
+            "<h2>Evaluation</h2><pre>{}</pre>",
+            html_escape(&serde_json::to_string_pretty(ev)?)
+        );
+    }
+    for (title, svg) in sections {
+        let _ = write!(page, "<h2>{title}</h2>{svg}");
+    }
+    let _ = write!(
+        page,
+        "<h2>Memory, predicted and measured</h2>{}</body></html>",
+        memory_table(&report.memory)
+    );
+    std::fs::write(path, page).with_context(|| format!("cannot write {}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::records::*;
+    use super::*;
+
+    #[test]
+    fn report_has_every_plot_and_the_memory_table() {
+        let mut report = RunReport {
+            dataset: "straight <synthetic>".into(),
+            mode: "window".into(),
+            ..Default::default()
+        };
+        for k in 0..5 {
+            let eop = CameraEop::from_pose(
+                &phototraverse_core::camera::Pose::from_degrees(
+                    90.0,
+                    0.0,
+                    0.0,
+                    [0.0, k as f64 * 1.01, 0.0],
+                ),
+                None,
+            );
+            report.epochs.push(EpochRecord {
+                epoch: k,
+                time: None,
+                status: EpochStatus::Ok,
+                note: None,
+                left: eop,
+                right: eop,
+                sigma0: Some(1.0),
+                chi2_passed: Some(true),
+                observations: 100,
+                tie_points: 25,
+                stage_ms: [("features".to_string(), 10.0), ("adjust".to_string(), 2.0)].into(),
+            });
+        }
+        report.ground_truth = Some((0..5).map(|k| [0.0, k as f64, 0.0]).collect());
+        report.residuals_px = vec![0.1, 0.2, 0.5, 1.5];
+        report.memory = vec![MemoryLine {
+            name: "sift.rings".into(),
+            kind: "working".into(),
+            predicted_bytes: 10,
+            measured_bytes: Some(9),
+        }];
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("report.html");
+        write_html(&path, &report).unwrap();
+        let page = std::fs::read_to_string(path).unwrap();
+        assert_eq!(page.matches("<svg").count(), 6);
+        for title in [
+            "Trajectory",
+            "Drift",
+            "sigma0",
+            "Tie points",
+            "Residuals",
+            "Time per stage",
+            "sift.rings",
+        ] {
+            assert!(page.contains(title), "{title} missing");
+        }
+        assert!(page.contains("straight &lt;synthetic&gt;"));
+    }
+}

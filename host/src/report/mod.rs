@@ -1,0 +1,16 @@
+//! What a run leaves on disk besides `poses.txt`: the per-epoch records
+//! (`report.json`), the exterior orientations with precision (`eop.csv`), the
+//! tie points (`points.ply`, E-Foto text files) and a human report with plots
+//! (`report.html`).
+//!
+//! The records are plain data filled by the run; every writer here only reads them.
+
+mod export;
+mod html;
+mod records;
+
+pub use export::{write_efoto, write_eop_csv, write_ply};
+pub use html::write_html;
+pub use records::{
+    CameraEop, EpochRecord, EpochStatus, ImageMeasurement, MemoryLine, RunReport, TiePoint,
+};

@@ -1,0 +1,143 @@
+//! Plain records of a run, serialised as `report.json`.
+use phototraverse_core::camera::Pose;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// Exterior orientation of one image with its standard deviations.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CameraEop {
+    pub omega_deg: f64,
+    pub phi_deg: f64,
+    pub kappa_deg: f64,
+    /// Perspective centre, metres, object frame.
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+    /// Standard deviations of omega, phi, kappa (deg) and X, Y, Z (m); `None` when not estimated.
+    pub sigma: Option<[f64; 6]>,
+}
+
+impl CameraEop {
+    pub fn from_pose(pose: &Pose, sigma_rad_m: Option<[f64; 6]>) -> Self {
+        let sigma = sigma_rad_m.map(|s| {
+            [
+                s[0].to_degrees(),
+                s[1].to_degrees(),
+                s[2].to_degrees(),
+                s[3],
+                s[4],
+                s[5],
+            ]
+        });
+        CameraEop {
+            omega_deg: pose.omega.to_degrees(),
+            phi_deg: pose.phi.to_degrees(),
+            kappa_deg: pose.kappa.to_degrees(),
+            x: pose.centre[0],
+            y: pose.centre[1],
+            z: pose.centre[2],
+            sigma,
+        }
+    }
+
+    pub fn to_pose(&self) -> Pose {
+        Pose::from_degrees(
+            self.omega_deg,
+            self.phi_deg,
+            self.kappa_deg,
+            [self.x, self.y, self.z],
+        )
+    }
+}
+
+/// How an epoch was solved.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EpochStatus {
+    /// Adjusted, tests passed.
+    Ok,
+    /// Adjusted, but a quality check failed (chi-square, few tie points); kept, flagged.
+    Flagged,
+    /// Not solved: the pose is the motion prediction.
+    Predicted,
+    /// The frames never arrived complete (link loss); the pose is the prediction.
+    Lost,
+}
+
+impl EpochStatus {
+    pub fn is_flagged(self) -> bool {
+        self != EpochStatus::Ok
+    }
+}
+
+/// One epoch of the traverse.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpochRecord {
+    pub epoch: usize,
+    pub time: Option<f64>,
+    pub status: EpochStatus,
+    /// Why the epoch is flagged, in words.
+    pub note: Option<String>,
+    pub left: CameraEop,
+    pub right: CameraEop,
+    pub sigma0: Option<f64>,
+    pub chi2_passed: Option<bool>,
+    pub observations: usize,
+    pub tie_points: usize,
+    /// Milliseconds per stage (features, matching, adjustment, link, ...).
+    pub stage_ms: BTreeMap<String, f64>,
+}
+
+/// A measured position of a tie point in one image.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ImageMeasurement {
+    pub epoch: usize,
+    /// 0 = left, 1 = right.
+    pub camera: u8,
+    /// Pixel column and row, pixel-centre convention ((0, 0) = centre of the top-left pixel).
+    pub col: f64,
+    pub row: f64,
+}
+
+/// A tie point in object space with its image measurements.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TiePoint {
+    pub id: u32,
+    pub xyz: [f64; 3],
+    pub sigma: Option<[f64; 3]>,
+    pub measurements: Vec<ImageMeasurement>,
+}
+
+/// One line of the memory budget: predicted from the configuration, measured by the firmware.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct MemoryLine {
+    pub name: String,
+    pub kind: String,
+    pub predicted_bytes: usize,
+    pub measured_bytes: Option<usize>,
+}
+
+/// Everything `report.json` holds.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct RunReport {
+    pub dataset: String,
+    pub mode: String,
+    pub image_width: u32,
+    pub image_height: u32,
+    pub epochs: Vec<EpochRecord>,
+    pub memory: Vec<MemoryLine>,
+    /// Image residuals of the last adjustment of each epoch, pixels (for the histogram).
+    pub residuals_px: Vec<f32>,
+    /// Ground-truth left camera centres, object frame, when the dataset has them.
+    pub ground_truth: Option<Vec<[f64; 3]>>,
+    /// Output of the evaluation against ground truth, when present.
+    pub evaluation: Option<serde_json::Value>,
+    /// Link statistics (bytes, retransmissions, errors).
+    pub link: Option<serde_json::Value>,
+}
+
+impl RunReport {
+    pub fn flagged_epochs(&self) -> usize {
+        self.epochs.iter().filter(|e| e.status.is_flagged()).count()
+    }
+}
