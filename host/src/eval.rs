@@ -64,7 +64,15 @@ pub struct Evaluation {
 }
 
 fn to_matrix(p: &KittiPose) -> Matrix4<f64> {
-    Matrix4::from_fn(|i, j| if i < 3 { p[i][j] } else if j == 3 { 1.0 } else { 0.0 })
+    Matrix4::from_fn(|i, j| {
+        if i < 3 {
+            p[i][j]
+        } else if j == 3 {
+            1.0
+        } else {
+            0.0
+        }
+    })
 }
 
 /// Inverse of a rigid transform (rotation transposed; robust to slightly non-orthonormal input
@@ -113,7 +121,10 @@ pub fn segment_lengths(path_length_m: f64) -> Vec<f64> {
 /// Evaluates `est` against `gt`.
 pub fn evaluate(gt: &[KittiPose], est: &[KittiPose]) -> Result<Evaluation, EvalError> {
     if gt.len() != est.len() {
-        return Err(EvalError::CountMismatch { gt: gt.len(), est: est.len() });
+        return Err(EvalError::CountMismatch {
+            gt: gt.len(),
+            est: est.len(),
+        });
     }
     if gt.is_empty() {
         return Err(EvalError::Empty);
@@ -132,7 +143,9 @@ pub fn evaluate(gt: &[KittiPose], est: &[KittiPose]) -> Result<Evaluation, EvalE
         if len > 0.0 {
             for first in (0..n).step_by(STEP_FRAMES) {
                 // Devkit lastFrameFromSegmentLength: first frame with dist > dist[first] + len.
-                let Some(last) = (first..n).find(|&i| dist[i] > dist[first] + len) else { continue };
+                let Some(last) = (first..n).find(|&i| dist[i] > dist[first] + len) else {
+                    continue;
+                };
                 let delta_gt = rigid_inverse(&gm[first]) * gm[last];
                 let delta_est = rigid_inverse(&em[first]) * em[last];
                 let err = rigid_inverse(&delta_est) * delta_gt;
@@ -153,7 +166,11 @@ pub fn evaluate(gt: &[KittiPose], est: &[KittiPose]) -> Result<Evaluation, EvalE
             rotation_deg_per_m: mean(lr).to_degrees(),
         });
     }
-    let sq: f64 = gt.iter().zip(est).map(|(g, e)| (position(g) - position(e)).norm_squared()).sum();
+    let sq: f64 = gt
+        .iter()
+        .zip(est)
+        .map(|(g, e)| (position(g) - position(e)).norm_squared())
+        .sum();
     let final_err = (position(&gt[n - 1]) - position(&est[n - 1])).norm();
     Ok(Evaluation {
         frames: n,
@@ -184,9 +201,18 @@ impl Evaluation {
             self.segment_lengths_m.first().copied().unwrap_or(0.0),
             self.segment_lengths_m.last().copied().unwrap_or(0.0)
         );
-        s += &format!("translation drift: {}\n", opt(self.translation_drift_pct, "%"));
-        s += &format!("rotation drift:    {}\n", opt(self.rotation_drift_deg_per_m, "deg/m"));
-        s += &format!("ATE RMSE:          {:.4} m (no alignment; both start at the identity)\n", self.ate_rmse_m);
+        s += &format!(
+            "translation drift: {}\n",
+            opt(self.translation_drift_pct, "%")
+        );
+        s += &format!(
+            "rotation drift:    {}\n",
+            opt(self.rotation_drift_deg_per_m, "deg/m")
+        );
+        s += &format!(
+            "ATE RMSE:          {:.4} m (no alignment; both start at the identity)\n",
+            self.ate_rmse_m
+        );
         s += &format!(
             "final position:    {:.4} m = {} of the distance travelled\n",
             self.final_position_error_m,
@@ -209,12 +235,16 @@ mod tests {
 
     /// A straight drive along KITTI z, `step` metres per frame.
     fn straight(n: usize, step: f64) -> Vec<KittiPose> {
-        (0..n).map(|i| pose(0.0, [0.0, 0.0, i as f64 * step])).collect()
+        (0..n)
+            .map(|i| pose(0.0, [0.0, 0.0, i as f64 * step]))
+            .collect()
     }
 
     #[test]
     fn perfect_estimate_has_zero_error() {
-        let gt: Vec<KittiPose> = (0..200).map(|i| pose(i as f64 * 0.01, [i as f64 * 0.3, 0.1, i as f64])).collect();
+        let gt: Vec<KittiPose> = (0..200)
+            .map(|i| pose(i as f64 * 0.01, [i as f64 * 0.3, 0.1, i as f64]))
+            .collect();
         let e = evaluate(&gt, &gt).unwrap();
         assert!(e.segments > 0);
         assert!(e.translation_drift_pct.unwrap() < 1e-12);
@@ -227,18 +257,25 @@ mod tests {
     fn scale_error_gives_its_translation_drift() {
         let step = 0.05;
         let gt = straight(2001, step); // 100 m
-        let est: Vec<KittiPose> = gt.iter().map(|p| pose(0.0, [0.0, 0.0, p[2][3] * 1.01])).collect();
+        let est: Vec<KittiPose> = gt
+            .iter()
+            .map(|p| pose(0.0, [0.0, 0.0, p[2][3] * 1.01]))
+            .collect();
         let e = evaluate(&gt, &est).unwrap();
         // Lengths 10..80 m; each segment runs one step past L, so the drift is
         // 1 % * (L + step) / L at most.
         assert_eq!(e.segment_lengths_m.len(), 8);
         assert!((e.segment_lengths_m[0] - 10.0).abs() < 1e-9);
         let t = e.translation_drift_pct.unwrap();
-        assert!(t >= 1.0 - 1e-9 && t <= 1.0 * (1.0 + step / 10.0) + 1e-9, "{t}");
+        assert!(
+            t >= 1.0 - 1e-9 && t <= 1.0 * (1.0 + step / 10.0) + 1e-9,
+            "{t}"
+        );
         assert!(e.rotation_drift_deg_per_m.unwrap() < 1e-9);
         assert!((e.final_position_error_pct.unwrap() - 1.0).abs() < 1e-9);
         // ATE: RMS of 0.01 * z over z uniform in [0, 100].
-        let expect: f64 = (gt.iter().map(|p| (0.01 * p[2][3]).powi(2)).sum::<f64>() / gt.len() as f64).sqrt();
+        let expect: f64 =
+            (gt.iter().map(|p| (0.01 * p[2][3]).powi(2)).sum::<f64>() / gt.len() as f64).sqrt();
         assert!((e.ate_rmse_m - expect).abs() < 1e-12);
     }
 
@@ -248,7 +285,7 @@ mod tests {
         let n = 2001;
         let gt = straight(n, step);
         let rate = 0.002; // rad/m
-        // Dead reckoning with a biased gyro: heading grows with distance, position follows it.
+                          // Dead reckoning with a biased gyro: heading grows with distance, position follows it.
         let mut est = vec![IDENTITY];
         let mut p = [0.0f64; 3];
         for i in 1..n {
@@ -260,14 +297,20 @@ mod tests {
         let e = evaluate(&gt, &est).unwrap();
         let r = e.rotation_drift_deg_per_m.unwrap();
         let expect = rate.to_degrees();
-        assert!(r >= expect - 1e-9 && r <= expect * (1.0 + step / 10.0) + 1e-9, "{r} vs {expect}");
+        assert!(
+            r >= expect - 1e-9 && r <= expect * (1.0 + step / 10.0) + 1e-9,
+            "{r} vs {expect}"
+        );
         // Translation drift of a constant-curvature error: chord deviation ~ rate L / 2.
         assert!(e.translation_drift_pct.unwrap() > 0.0);
     }
 
     #[test]
     fn devkit_lengths_for_long_paths() {
-        assert_eq!(segment_lengths(5000.0), vec![100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0]);
+        assert_eq!(
+            segment_lengths(5000.0),
+            vec![100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0]
+        );
         assert_eq!(segment_lengths(1000.0)[7], 800.0);
         assert_eq!(segment_lengths(50.0)[0], 5.0);
     }
@@ -275,7 +318,10 @@ mod tests {
     #[test]
     fn different_counts_are_an_error() {
         let gt = straight(10, 1.0);
-        assert_eq!(evaluate(&gt, &gt[..9]).unwrap_err(), EvalError::CountMismatch { gt: 10, est: 9 });
+        assert_eq!(
+            evaluate(&gt, &gt[..9]).unwrap_err(),
+            EvalError::CountMismatch { gt: 10, est: 9 }
+        );
         assert_eq!(evaluate(&[], &[]).unwrap_err(), EvalError::Empty);
     }
 
@@ -286,12 +332,23 @@ mod tests {
         let e = evaluate(&gt, &est).unwrap();
         // One start frame, all 8 lengths (0.1..0.8 m) end at frame 1: error 1 m each.
         assert_eq!(e.segments, 8);
-        let expect = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8].iter().map(|l| 100.0 / l).sum::<f64>() / 8.0;
+        let expect = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8]
+            .iter()
+            .map(|l| 100.0 / l)
+            .sum::<f64>()
+            / 8.0;
         assert!((e.translation_drift_pct.unwrap() - expect).abs() < 1e-9);
         assert!((e.ate_rmse_m - (0.5f64).sqrt()).abs() < 1e-12);
         assert!((e.final_position_error_pct.unwrap() - 100.0).abs() < 1e-9);
         // A single pose: no path, no segment, no percentage.
         let e = evaluate(&gt[..1], &est[..1]).unwrap();
-        assert_eq!((e.segments, e.translation_drift_pct, e.final_position_error_pct), (0, None, None));
+        assert_eq!(
+            (
+                e.segments,
+                e.translation_drift_pct,
+                e.final_position_error_pct
+            ),
+            (0, None, None)
+        );
     }
 }

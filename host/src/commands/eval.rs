@@ -19,11 +19,13 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let gt = read_poses(&args.gt)?;
     let est = read_poses(&args.est)?;
-    let e = evaluate(&gt, &est).with_context(|| format!("{} vs {}", args.gt.display(), args.est.display()))?;
+    let e = evaluate(&gt, &est)
+        .with_context(|| format!("{} vs {}", args.gt.display(), args.est.display()))?;
     print!("{}", e.summary());
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&e)?;
-        std::fs::write(path, text + "\n").with_context(|| format!("{}: cannot write", path.display()))?;
+        std::fs::write(path, text + "\n")
+            .with_context(|| format!("{}: cannot write", path.display()))?;
         println!("wrote {}", path.display());
     }
     Ok(())
