@@ -3,6 +3,8 @@
 pub mod commands;
 pub mod dataset;
 pub mod eval;
+pub mod link;
 pub mod poses;
 pub mod report;
+pub mod session;
 pub mod synth;

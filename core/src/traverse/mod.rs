@@ -114,6 +114,15 @@ impl core::fmt::Display for TraverseError {
     }
 }
 
+/// Auxiliary observations of an epoch, when the vehicle has them.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct AuxObservations {
+    /// Distance travelled since the previous epoch and its sigma, metres.
+    pub odometer: Option<(f64, f64)>,
+    /// Position of the left perspective centre (object frame) and its sigma, metres.
+    pub gnss: Option<([f64; 3], f64)>,
+}
+
 /// A left pose with its time, for the motion prediction.
 #[derive(Debug, Clone, Copy)]
 struct Stamped {
@@ -224,6 +233,19 @@ impl<'a> Traverse<'a> {
         time_s: f64,
         clock: &impl Clock,
     ) -> EpochOutput {
+        self.process_with_aux(left, right, time_s, AuxObservations::default(), clock)
+    }
+
+    /// [`Traverse::process`] with odometer and GNSS observations of the epoch, which
+    /// enter the adjustment as weighted constraints (bridging a GNSS outage).
+    pub fn process_with_aux(
+        &mut self,
+        left: &ImageView,
+        right: &ImageView,
+        time_s: f64,
+        aux: AuxObservations,
+        clock: &impl Clock,
+    ) -> EpochOutput {
         let t0 = clock.now_us();
         let k = self.epochs;
         self.epochs = self.epochs.wrapping_add(1);
@@ -236,12 +258,11 @@ impl<'a> Traverse<'a> {
         };
 
         let fill = 1 - self.cur;
-        if !self.extract(fill, left, right, &mut out) {
+        if !self.extract(fill, left, right, &mut out, clock) {
             out.settle(false);
             return self.finish(out, t0, clock);
         }
         let t1 = clock.now_us();
-        out.times.features_us = elapsed(t0, t1);
 
         let report = match self.match_epoch(fill, left, right, &prediction) {
             Ok(r) => r,
@@ -276,7 +297,7 @@ impl<'a> Traverse<'a> {
             _ => 0,
         };
 
-        let adjusted = self.adjust_epoch(k, time_s, &prediction, &mut out, clock, t2);
+        let adjusted = self.adjust_epoch(k, (time_s, aux), &prediction, &mut out, clock, t2);
         out.settle(adjusted);
         self.history = [
             self.history[1],
@@ -364,7 +385,7 @@ impl<'a> Traverse<'a> {
     fn adjust_epoch(
         &mut self,
         k: u32,
-        time_s: f64,
+        (time_s, aux): (f64, AuxObservations),
         prediction: &Pose,
         out: &mut EpochOutput,
         clock: &impl Clock,
@@ -388,6 +409,13 @@ impl<'a> Traverse<'a> {
             return false;
         };
         self.window_inputs[self.window.n_epochs() - 1] = k;
+        // Invalid auxiliary values (NaN, sigma <= 0) are refused by the window and ignored.
+        if let Some((d, s)) = aux.odometer {
+            let _ = self.window.set_odometer(id, d, s);
+        }
+        if let Some((p, s)) = aux.gnss {
+            let _ = self.window.set_gnss(id, p, s);
+        }
         if !first && (out.tie_points as usize) < self.cfg.min_tie_points {
             out.flags |= flags::FEW_TIE_POINTS;
             // Continuity from the motion prediction; errors here only mean a NaN pose.

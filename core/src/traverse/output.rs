@@ -65,7 +65,9 @@ impl EpochStatus {
 /// Microseconds per stage of one epoch.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct StageTimes {
-    pub features_us: u32,
+    pub sift_left_us: u32,
+    pub sift_right_us: u32,
+    /// Stereo and temporal matching, quads and tracks.
     pub matching_us: u32,
     pub initial_us: u32,
     pub adjust_us: u32,

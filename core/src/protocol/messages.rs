@@ -1,0 +1,1103 @@
+//! The message set: one plain `Repr` per message type with `parse` (zero-copy
+//! over the payload; chunk data and error text borrow it) and `emit`.
+//! All integers and floats are little-endian. Layouts are tabulated in
+//! `docs/protocol.md`; each struct below lists its fields in wire order.
+use super::packet::EncodeError;
+use crate::camera::{Interior, Rig};
+
+/// Message type byte of the header.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum MessageType {
+    Hello = 0x01,
+    Capabilities = 0x02,
+    Configure = 0x03,
+    ConfigAccepted = 0x04,
+    FrameBegin = 0x05,
+    FrameChunk = 0x06,
+    FrameEnd = 0x07,
+    Aux = 0x08,
+    Result = 0x09,
+    Stats = 0x0A,
+    Error = 0x0B,
+    Ack = 0x0C,
+    Nack = 0x0D,
+    Reset = 0x0E,
+}
+
+impl MessageType {
+    pub fn from_u8(b: u8) -> Option<Self> {
+        use MessageType::*;
+        Some(match b {
+            0x01 => Hello,
+            0x02 => Capabilities,
+            0x03 => Configure,
+            0x04 => ConfigAccepted,
+            0x05 => FrameBegin,
+            0x06 => FrameChunk,
+            0x07 => FrameEnd,
+            0x08 => Aux,
+            0x09 => Result,
+            0x0A => Stats,
+            0x0B => Error,
+            0x0C => Ack,
+            0x0D => Nack,
+            0x0E => Reset,
+            _ => return None,
+        })
+    }
+
+    /// Whether the message travels in the sequenced, acknowledged stream.
+    /// Ack and Nack are the control channel of that stream and are not sequenced.
+    pub fn is_sequenced(self) -> bool {
+        !matches!(self, MessageType::Ack | MessageType::Nack)
+    }
+}
+
+/// Why a payload could not be parsed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ParseError {
+    /// The payload ends before a field.
+    Truncated,
+    /// A field holds a value outside its domain (named).
+    Invalid(&'static str),
+    /// A type byte no message has.
+    UnknownType(u8),
+}
+
+/// Little-endian field reader over a payload.
+pub struct Reader<'a> {
+    buf: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Reader<'a> {
+    pub fn new(buf: &'a [u8]) -> Self {
+        Reader { buf, pos: 0 }
+    }
+    pub fn bytes(&mut self, n: usize) -> Result<&'a [u8], ParseError> {
+        let end = self.pos.checked_add(n).ok_or(ParseError::Truncated)?;
+        let s = self.buf.get(self.pos..end).ok_or(ParseError::Truncated)?;
+        self.pos = end;
+        Ok(s)
+    }
+    fn array<const N: usize>(&mut self) -> Result<[u8; N], ParseError> {
+        let mut a = [0u8; N];
+        a.copy_from_slice(self.bytes(N)?);
+        Ok(a)
+    }
+    pub fn u8(&mut self) -> Result<u8, ParseError> {
+        Ok(self.array::<1>()?[0])
+    }
+    pub fn u16(&mut self) -> Result<u16, ParseError> {
+        Ok(u16::from_le_bytes(self.array()?))
+    }
+    pub fn u32(&mut self) -> Result<u32, ParseError> {
+        Ok(u32::from_le_bytes(self.array()?))
+    }
+    pub fn u64(&mut self) -> Result<u64, ParseError> {
+        Ok(u64::from_le_bytes(self.array()?))
+    }
+    pub fn f32(&mut self) -> Result<f32, ParseError> {
+        Ok(f32::from_le_bytes(self.array()?))
+    }
+    pub fn f64(&mut self) -> Result<f64, ParseError> {
+        Ok(f64::from_le_bytes(self.array()?))
+    }
+    pub fn f64s<const N: usize>(&mut self) -> Result<[f64; N], ParseError> {
+        let mut a = [0.0; N];
+        for v in a.iter_mut() {
+            *v = self.f64()?;
+        }
+        Ok(a)
+    }
+    pub fn u32s<const N: usize>(&mut self) -> Result<[u32; N], ParseError> {
+        let mut a = [0; N];
+        for v in a.iter_mut() {
+            *v = self.u32()?;
+        }
+        Ok(a)
+    }
+    pub fn rest(&mut self) -> &'a [u8] {
+        let s = &self.buf[self.pos..];
+        self.pos = self.buf.len();
+        s
+    }
+    pub fn remaining(&self) -> usize {
+        self.buf.len() - self.pos
+    }
+}
+
+/// Little-endian field writer into a payload buffer.
+pub struct Writer<'a> {
+    buf: &'a mut [u8],
+    pos: usize,
+}
+
+impl<'a> Writer<'a> {
+    pub fn new(buf: &'a mut [u8]) -> Self {
+        Writer { buf, pos: 0 }
+    }
+    pub fn bytes(&mut self, b: &[u8]) -> Result<(), EncodeError> {
+        let end = self.pos + b.len();
+        let dst = self
+            .buf
+            .get_mut(self.pos..end)
+            .ok_or(EncodeError::PayloadTooLarge)?;
+        dst.copy_from_slice(b);
+        self.pos = end;
+        Ok(())
+    }
+    pub fn u8(&mut self, v: u8) -> Result<(), EncodeError> {
+        self.bytes(&[v])
+    }
+    pub fn u16(&mut self, v: u16) -> Result<(), EncodeError> {
+        self.bytes(&v.to_le_bytes())
+    }
+    pub fn u32(&mut self, v: u32) -> Result<(), EncodeError> {
+        self.bytes(&v.to_le_bytes())
+    }
+    pub fn u64(&mut self, v: u64) -> Result<(), EncodeError> {
+        self.bytes(&v.to_le_bytes())
+    }
+    pub fn f32(&mut self, v: f32) -> Result<(), EncodeError> {
+        self.bytes(&v.to_le_bytes())
+    }
+    pub fn f64(&mut self, v: f64) -> Result<(), EncodeError> {
+        self.bytes(&v.to_le_bytes())
+    }
+    pub fn f64s(&mut self, v: &[f64]) -> Result<(), EncodeError> {
+        v.iter().try_for_each(|x| self.f64(*x))
+    }
+    pub fn u32s(&mut self, v: &[u32]) -> Result<(), EncodeError> {
+        v.iter().try_for_each(|x| self.u32(*x))
+    }
+    pub fn len(&self) -> usize {
+        self.pos
+    }
+    pub fn is_empty(&self) -> bool {
+        self.pos == 0
+    }
+}
+
+/// One message: its type, how to parse it from a payload and emit it into one.
+pub trait Repr<'a>: Sized {
+    const TYPE: MessageType;
+    fn parse(payload: &'a [u8]) -> Result<Self, ParseError>;
+    /// Writes the payload; returns its length.
+    fn emit(&self, buf: &mut [u8]) -> Result<usize, EncodeError>;
+}
+
+macro_rules! repr {
+    ($ty:ident $(<$lt:lifetime>)?, $mt:ident, |$r:ident| $parse:block, |$s:ident, $w:ident| $emit:block) => {
+        impl<'a> Repr<'a> for $ty $(<$lt>)? {
+            const TYPE: MessageType = MessageType::$mt;
+            fn parse(payload: &'a [u8]) -> Result<Self, ParseError> {
+                let mut $r = Reader::new(payload);
+                $parse
+            }
+            fn emit(&self, buf: &mut [u8]) -> Result<usize, EncodeError> {
+                let $s = self;
+                let mut $w = Writer::new(buf);
+                $emit
+                Ok($w.len())
+            }
+        }
+    };
+}
+
+/// Host -> firmware: opens a session. A new `session` id resynchronises both
+/// sequence spaces (a host reconnecting to a running firmware).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Hello {
+    pub session: u32,
+    /// Host software version (major, minor, patch).
+    pub host_version: [u8; 3],
+}
+repr!(
+    Hello,
+    Hello,
+    |r| {
+        Ok(Hello {
+            session: r.u32()?,
+            host_version: [r.u8()?, r.u8()?, r.u8()?],
+        })
+    },
+    |s, w| {
+        w.u32(s.session)?;
+        w.bytes(&s.host_version)?;
+    }
+);
+
+/// What the firmware can processs.
+pub mod processor_kind {
+    /// Image statistics only (bring-up; no features).
+    pub const IMAGE_STATS: u8 = 0;
+    /// Reduced SIFT on both images.
+    pub const SIFT: u8 = 1;
+    /// The full traverse.
+    pub const TRAVERSE: u8 = 2;
+}
+
+/// Firmware -> host: answer to Hello and Reset.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Capabilities {
+    pub firmware_version: [u8; 3],
+    pub protocol_version: u8,
+    /// Largest payload the firmware accepts.
+    pub max_payload: u16,
+    /// Packets the host may have in flight unacknowledged.
+    pub rx_window: u16,
+    pub max_width: u16,
+    pub max_height: u16,
+    /// Bit 0: gray u8, bit 1: gray u16.
+    pub pixel_formats: u8,
+    /// [`processor_kind`].
+    pub processor: u8,
+    pub max_keypoints: u32,
+    /// Bytes of working storage the configuration must fit in.
+    pub work_bytes: u32,
+    /// Bytes of link buffers (decoder, retransmission window).
+    pub link_bytes: u32,
+}
+repr!(
+    Capabilities,
+    Capabilities,
+    |r| {
+        Ok(Capabilities {
+            firmware_version: [r.u8()?, r.u8()?, r.u8()?],
+            protocol_version: r.u8()?,
+            max_payload: r.u16()?,
+            rx_window: r.u16()?,
+            max_width: r.u16()?,
+            max_height: r.u16()?,
+            pixel_formats: r.u8()?,
+            processor: r.u8()?,
+            max_keypoints: r.u32()?,
+            work_bytes: r.u32()?,
+            link_bytes: r.u32()?,
+        })
+    },
+    |s, w| {
+        w.bytes(&s.firmware_version)?;
+        w.u8(s.protocol_version)?;
+        w.u16(s.max_payload)?;
+        w.u16(s.rx_window)?;
+        w.u16(s.max_width)?;
+        w.u16(s.max_height)?;
+        w.u8(s.pixel_formats)?;
+        w.u8(s.processor)?;
+        w.u32(s.max_keypoints)?;
+        w.u32(s.work_bytes)?;
+        w.u32(s.link_bytes)?;
+    }
+);
+
+/// Payload version of [`Configure`] this build writes. Later versions append
+/// fields; a parser reads the fields it knows and ignores the rest.
+pub const CONFIG_VERSION: u16 = 1;
+
+/// Pipeline capacities and thresholds, plain numbers the traverse maps to its config.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pipeline {
+    pub max_width: u16,
+    pub max_height: u16,
+    /// Bytes per pixel of the largest frame format to buffer (1 or 2).
+    pub pixel_bytes: u8,
+    pub octaves: u8,
+    pub scales_per_octave: u8,
+    pub keypoints_per_image: u32,
+    pub window_len: u16,
+    pub track_capacity: u32,
+    pub contrast_threshold: f32,
+    pub edge_ratio: f32,
+    pub match_ratio: f32,
+    pub max_disparity_px: f32,
+}
+
+impl Default for Pipeline {
+    fn default() -> Self {
+        Pipeline {
+            max_width: 640,
+            max_height: 480,
+            pixel_bytes: 1,
+            octaves: 4,
+            scales_per_octave: 3,
+            keypoints_per_image: 1000,
+            window_len: 5,
+            track_capacity: 2000,
+            contrast_threshold: 0.04,
+            edge_ratio: 10.0,
+            match_ratio: 0.8,
+            max_disparity_px: 128.0,
+        }
+    }
+}
+
+/// Host -> firmware: the rig and the pipeline. Answered by ConfigAccepted or Error.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Configure {
+    pub version: u16,
+    pub rig: Rig,
+    pub pipeline: Pipeline,
+}
+
+fn parse_interior(r: &mut Reader) -> Result<Interior, ParseError> {
+    Ok(Interior {
+        width_px: r.u32()?,
+        height_px: r.u32()?,
+        pixel_size_mm: r.f64s()?,
+        focal_mm: r.f64()?,
+        principal_point_mm: r.f64s()?,
+        radial: r.f64s()?,
+        decentering: r.f64s()?,
+    })
+}
+
+fn emit_interior(w: &mut Writer, i: &Interior) -> Result<(), EncodeError> {
+    w.u32(i.width_px)?;
+    w.u32(i.height_px)?;
+    w.f64s(&i.pixel_size_mm)?;
+    w.f64(i.focal_mm)?;
+    w.f64s(&i.principal_point_mm)?;
+    w.f64s(&i.radial)?;
+    w.f64s(&i.decentering)
+}
+
+repr!(
+    Configure,
+    Configure,
+    |r| {
+        let version = r.u16()?;
+        if version == 0 {
+            return Err(ParseError::Invalid("configuration version 0"));
+        }
+        let rig = Rig {
+            left: parse_interior(&mut r)?,
+            right: parse_interior(&mut r)?,
+            relative_angles: r.f64s()?,
+            base_m: r.f64s()?,
+        };
+        let pipeline = Pipeline {
+            max_width: r.u16()?,
+            max_height: r.u16()?,
+            pixel_bytes: r.u8()?,
+            octaves: r.u8()?,
+            scales_per_octave: r.u8()?,
+            keypoints_per_image: r.u32()?,
+            window_len: r.u16()?,
+            track_capacity: r.u32()?,
+            contrast_threshold: r.f32()?,
+            edge_ratio: r.f32()?,
+            match_ratio: r.f32()?,
+            max_disparity_px: r.f32()?,
+        };
+        // Fields of later versions follow; this build ignores them.
+        let _ = r.rest();
+        Ok(Configure {
+            version,
+            rig,
+            pipeline,
+        })
+    },
+    |s, w| {
+        w.u16(s.version)?;
+        emit_interior(&mut w, &s.rig.left)?;
+        emit_interior(&mut w, &s.rig.right)?;
+        w.f64s(&s.rig.relative_angles)?;
+        w.f64s(&s.rig.base_m)?;
+        let p = &s.pipeline;
+        w.u16(p.max_width)?;
+        w.u16(p.max_height)?;
+        w.u8(p.pixel_bytes)?;
+        w.u8(p.octaves)?;
+        w.u8(p.scales_per_octave)?;
+        w.u32(p.keypoints_per_image)?;
+        w.u16(p.window_len)?;
+        w.u32(p.track_capacity)?;
+        w.f32(p.contrast_threshold)?;
+        w.f32(p.edge_ratio)?;
+        w.f32(p.match_ratio)?;
+        w.f32(p.max_disparity_px)?;
+    }
+);
+
+/// Firmware -> host: the configuration fits; its predicted memory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ConfigAccepted {
+    /// Predicted bytes of the whole configuration (frames included).
+    pub predicted_bytes: u32,
+    /// Bytes of the two frame buffers.
+    pub frame_bytes: u32,
+    /// Working storage available.
+    pub capacity_bytes: u32,
+}
+repr!(
+    ConfigAccepted,
+    ConfigAccepted,
+    |r| {
+        Ok(ConfigAccepted {
+            predicted_bytes: r.u32()?,
+            frame_bytes: r.u32()?,
+            capacity_bytes: r.u32()?,
+        })
+    },
+    |s, w| {
+        w.u32(s.predicted_bytes)?;
+        w.u32(s.frame_bytes)?;
+        w.u32(s.capacity_bytes)?;
+    }
+);
+
+/// Camera of a stereo pair.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Camera {
+    Left = 0,
+    Right = 1,
+}
+
+impl Camera {
+    fn parse(b: u8) -> Result<Self, ParseError> {
+        match b {
+            0 => Ok(Camera::Left),
+            1 => Ok(Camera::Right),
+            _ => Err(ParseError::Invalid("camera")),
+        }
+    }
+    pub fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// Pixel format of a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PixelFormat {
+    /// 8-bit gray, one byte per pixel.
+    Gray8,
+    /// Gray in u16 LE words with `bits` significant bits (9..=16), scaled to 8 bits on arrival.
+    Gray16 { bits: u8 },
+}
+
+impl PixelFormat {
+    pub fn bytes_per_pixel(self) -> usize {
+        match self {
+            PixelFormat::Gray8 => 1,
+            PixelFormat::Gray16 { .. } => 2,
+        }
+    }
+}
+
+/// Host -> firmware: a frame of one camera of an epoch starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameBegin {
+    pub epoch: u32,
+    pub camera: Camera,
+    pub format: PixelFormat,
+    pub width: u16,
+    pub height: u16,
+    /// Exposure time stamp, microseconds.
+    pub timestamp_us: u64,
+}
+
+impl FrameBegin {
+    /// Bytes of the frame on the wire.
+    pub fn frame_bytes(&self) -> usize {
+        self.width as usize * self.height as usize * self.format.bytes_per_pixel()
+    }
+}
+
+repr!(
+    FrameBegin,
+    FrameBegin,
+    |r| {
+        let epoch = r.u32()?;
+        let camera = Camera::parse(r.u8()?)?;
+        let (code, bits) = (r.u8()?, r.u8()?);
+        let format = match code {
+            0 => PixelFormat::Gray8,
+            1 if (9..=16).contains(&bits) => PixelFormat::Gray16 { bits },
+            _ => return Err(ParseError::Invalid("pixel format")),
+        };
+        Ok(FrameBegin {
+            epoch,
+            camera,
+            format,
+            width: r.u16()?,
+            height: r.u16()?,
+            timestamp_us: r.u64()?,
+        })
+    },
+    |s, w| {
+        w.u32(s.epoch)?;
+        w.u8(s.camera as u8)?;
+        match s.format {
+            PixelFormat::Gray8 => {
+                w.u8(0)?;
+                w.u8(8)?;
+            }
+            PixelFormat::Gray16 { bits } => {
+                w.u8(1)?;
+                w.u8(bits)?;
+            }
+        }
+        w.u16(s.width)?;
+        w.u16(s.height)?;
+        w.u64(s.timestamp_us)?;
+    }
+);
+
+/// Host -> firmware: bytes of a frame at a byte offset (zero-copy view of the payload).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameChunk<'a> {
+    pub epoch: u32,
+    pub camera: Camera,
+    pub offset: u32,
+    pub data: &'a [u8],
+}
+
+/// Bytes of a FrameChunk payload before its data.
+pub const CHUNK_HEADER_LEN: usize = 9;
+
+repr!(
+    FrameChunk<'a>,
+    FrameChunk,
+    |r| {
+        Ok(FrameChunk {
+            epoch: r.u32()?,
+            camera: Camera::parse(r.u8()?)?,
+            offset: r.u32()?,
+            data: r.rest(),
+        })
+    },
+    |s, w| {
+        w.u32(s.epoch)?;
+        w.u8(s.camera as u8)?;
+        w.u32(s.offset)?;
+        w.bytes(s.data)?;
+    }
+);
+
+/// Host -> firmware: the frame is complete; its length and CRC-32 check the assembly.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameEnd {
+    pub epoch: u32,
+    pub camera: Camera,
+    pub total_bytes: u32,
+    pub crc32: u32,
+}
+repr!(
+    FrameEnd,
+    FrameEnd,
+    |r| {
+        Ok(FrameEnd {
+            epoch: r.u32()?,
+            camera: Camera::parse(r.u8()?)?,
+            total_bytes: r.u32()?,
+            crc32: r.u32()?,
+        })
+    },
+    |s, w| {
+        w.u32(s.epoch)?;
+        w.u8(s.camera as u8)?;
+        w.u32(s.total_bytes)?;
+        w.u32(s.crc32)?;
+    }
+);
+
+/// Host -> firmware: auxiliary observations of an epoch (sent before its frames).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Aux {
+    pub epoch: u32,
+    /// Bit 0: odometer valid, bit 1: GNSS valid.
+    pub flags: u8,
+    /// Distance travelled since the previous epoch, m, and its sigma.
+    pub odometer_m: f64,
+    pub odometer_sigma_m: f64,
+    /// GNSS position in the object frame, m, and its sigmas.
+    pub gnss_m: [f64; 3],
+    pub gnss_sigma_m: [f64; 3],
+}
+
+pub const AUX_ODOMETER: u8 = 1;
+pub const AUX_GNSS: u8 = 2;
+
+repr!(
+    Aux,
+    Aux,
+    |r| {
+        Ok(Aux {
+            epoch: r.u32()?,
+            flags: r.u8()?,
+            odometer_m: r.f64()?,
+            odometer_sigma_m: r.f64()?,
+            gnss_m: r.f64s()?,
+            gnss_sigma_m: r.f64s()?,
+        })
+    },
+    |s, w| {
+        w.u32(s.epoch)?;
+        w.u8(s.flags)?;
+        w.f64(s.odometer_m)?;
+        w.f64(s.odometer_sigma_m)?;
+        w.f64s(&s.gnss_m)?;
+        w.f64s(&s.gnss_sigma_m)?;
+    }
+);
+
+/// Status of an epoch's result.
+pub mod status {
+    /// Oriented.
+    pub const OK: u8 = 0;
+    /// Features extracted, no orientation (the traverse is not running).
+    pub const FEATURES_ONLY: u8 = 1;
+    /// Image statistics only (bring-up processor).
+    pub const STATS_ONLY: u8 = 2;
+    /// The epoch's frames could not be assembled (lost chunk, CRC): the epoch is lost.
+    pub const LOST: u8 = 3;
+    /// The processor failed on this epoch (see the Error message).
+    pub const FAILED: u8 = 4;
+    /// Oriented, but flagged (few tie points, chi-square test, lost continuity).
+    pub const FLAGGED: u8 = 5;
+    /// Not oriented from the images: the pose is the motion prediction.
+    pub const PREDICTED: u8 = 6;
+}
+
+/// Counts of an epoch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Counts {
+    pub keypoints: [u32; 2],
+    pub stereo_matches: u32,
+    pub temporal_matches: u32,
+    pub tie_points: u32,
+    pub observations: u32,
+    /// Items dropped because a capacity was full.
+    pub dropped: u32,
+}
+
+/// Firmware -> host: result of one epoch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EpochResult {
+    pub epoch: u32,
+    /// [`status`].
+    pub status: u8,
+    /// Left camera: omega, phi, kappa (rad), X, Y, Z (m).
+    pub pose: [f64; 6],
+    /// Standard deviations of `pose`.
+    pub sigma: [f64; 6],
+    pub sigma0: f64,
+    pub counts: Counts,
+    /// Processor-defined summary values (for the statistics processor: mean and
+    /// gradient energy of each image).
+    pub extra: [f64; 4],
+}
+
+impl EpochResult {
+    pub fn empty(epoch: u32, status: u8) -> Self {
+        EpochResult {
+            epoch,
+            status,
+            pose: [0.0; 6],
+            sigma: [0.0; 6],
+            sigma0: 0.0,
+            counts: Counts::default(),
+            extra: [0.0; 4],
+        }
+    }
+}
+
+repr!(
+    EpochResult,
+    Result,
+    |r| {
+        Ok(EpochResult {
+            epoch: r.u32()?,
+            status: r.u8()?,
+            pose: r.f64s()?,
+            sigma: r.f64s()?,
+            sigma0: r.f64()?,
+            counts: Counts {
+                keypoints: r.u32s()?,
+                stereo_matches: r.u32()?,
+                temporal_matches: r.u32()?,
+                tie_points: r.u32()?,
+                observations: r.u32()?,
+                dropped: r.u32()?,
+            },
+            extra: r.f64s()?,
+        })
+    },
+    |s, w| {
+        w.u32(s.epoch)?;
+        w.u8(s.status)?;
+        w.f64s(&s.pose)?;
+        w.f64s(&s.sigma)?;
+        w.f64(s.sigma0)?;
+        let c = &s.counts;
+        w.u32s(&c.keypoints)?;
+        w.u32s(&[
+            c.stereo_matches,
+            c.temporal_matches,
+            c.tie_points,
+            c.observations,
+            c.dropped,
+        ])?;
+        w.f64s(&s.extra)?;
+    }
+);
+
+/// Pipeline stages timed in [`Stats`].
+pub mod stage {
+    pub const ASSEMBLE: usize = 0;
+    pub const SIFT_LEFT: usize = 1;
+    pub const SIFT_RIGHT: usize = 2;
+    pub const STEREO_MATCH: usize = 3;
+    pub const TEMPORAL_MATCH: usize = 4;
+    pub const INITIAL_VALUES: usize = 5;
+    pub const ADJUST: usize = 6;
+    pub const TOTAL: usize = 7;
+    pub const COUNT: usize = 8;
+    pub const NAMES: [&str; COUNT] = [
+        "assemble",
+        "sift_left",
+        "sift_right",
+        "stereo_match",
+        "temporal_match",
+        "initial_values",
+        "adjust",
+        "total",
+    ];
+}
+
+/// Link counters of one side.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct LinkCounters {
+    pub packets_ok: u32,
+    pub crc_errors: u32,
+    pub framing_errors: u32,
+    pub oversized: u32,
+    pub unexpected: u32,
+    pub duplicates: u32,
+    pub gaps: u32,
+    pub retransmissions: u32,
+}
+
+impl LinkCounters {
+    fn emit(&self, w: &mut Writer) -> Result<(), EncodeError> {
+        w.u32s(&[
+            self.packets_ok,
+            self.crc_errors,
+            self.framing_errors,
+            self.oversized,
+        ])?;
+        w.u32s(&[
+            self.unexpected,
+            self.duplicates,
+            self.gaps,
+            self.retransmissions,
+        ])
+    }
+    fn parse(r: &mut Reader) -> Result<Self, ParseError> {
+        let [packets_ok, crc_errors, framing_errors, oversized, unexpected, duplicates, gaps, retransmissions] =
+            r.u32s::<8>()?;
+        Ok(LinkCounters {
+            packets_ok,
+            crc_errors,
+            framing_errors,
+            oversized,
+            unexpected,
+            duplicates,
+            gaps,
+            retransmissions,
+        })
+    }
+}
+
+/// Firmware -> host: timings and memory after an epoch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Stats {
+    pub epoch: u32,
+    /// Microseconds per [`stage`].
+    pub timings_us: [u32; stage::COUNT],
+    pub memory_predicted: u32,
+    /// Measured high-water mark of the working storage.
+    pub memory_high_water: u32,
+    pub memory_capacity: u32,
+    pub epochs_ok: u32,
+    pub epochs_lost: u32,
+    /// The firmware's receive side and its retransmissions.
+    pub link: LinkCounters,
+}
+repr!(
+    Stats,
+    Stats,
+    |r| {
+        Ok(Stats {
+            epoch: r.u32()?,
+            timings_us: r.u32s()?,
+            memory_predicted: r.u32()?,
+            memory_high_water: r.u32()?,
+            memory_capacity: r.u32()?,
+            epochs_ok: r.u32()?,
+            epochs_lost: r.u32()?,
+            link: LinkCounters::parse(&mut r)?,
+        })
+    },
+    |s, w| {
+        w.u32(s.epoch)?;
+        w.u32s(&s.timings_us)?;
+        w.u32s(&[
+            s.memory_predicted,
+            s.memory_high_water,
+            s.memory_capacity,
+            s.epochs_ok,
+            s.epochs_lost,
+        ])?;
+        s.link.emit(&mut w)?;
+    }
+);
+
+/// Error codes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u16)]
+pub enum ErrorCode {
+    /// A packet failed its CRC or framing.
+    Corrupted = 1,
+    /// A packet of another protocol version.
+    Version = 2,
+    /// A packet larger than the receiver's buffer.
+    Oversized = 3,
+    /// A message type or payload the receiver cannot use now.
+    Unexpected = 4,
+    /// A payload that does not parse.
+    Malformed = 5,
+    /// A configuration that does not fit the firmware's memory or limits.
+    ConfigTooLarge = 6,
+    /// A configuration with invalid values.
+    ConfigInvalid = 7,
+    /// Frame data before a configuration.
+    NotConfigured = 8,
+    /// A frame larger than the configured capacity.
+    FrameTooLarge = 9,
+    /// A chunk whose offset is not the next expected byte.
+    ChunkOutOfOrder = 10,
+    /// The assembled frame's length or CRC differs from FrameEnd.
+    FrameCrc = 11,
+    /// A frame of an epoch was abandoned (a new epoch started first).
+    EpochIncomplete = 12,
+    /// The processor failed.
+    Processing = 13,
+    /// Anything else.
+    Other = 0xFFFF,
+}
+
+impl ErrorCode {
+    pub fn from_u16(v: u16) -> Self {
+        use ErrorCode::*;
+        match v {
+            1 => Corrupted,
+            2 => Version,
+            3 => Oversized,
+            4 => Unexpected,
+            5 => Malformed,
+            6 => ConfigTooLarge,
+            7 => ConfigInvalid,
+            8 => NotConfigured,
+            9 => FrameTooLarge,
+            10 => ChunkOutOfOrder,
+            11 => FrameCrc,
+            12 => EpochIncomplete,
+            13 => Processing,
+            _ => Other,
+        }
+    }
+}
+
+/// Most bytes of error text.
+pub const MAX_ERROR_TEXT: usize = 160;
+
+/// Either side: something went wrong; `text` is human-readable UTF-8.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ErrorMsg<'a> {
+    pub code: ErrorCode,
+    /// Epoch concerned, or `u32::MAX`.
+    pub epoch: u32,
+    /// Sequence number of the offending packet, or `u16::MAX`.
+    pub seq: u16,
+    pub text: &'a str,
+}
+repr!(
+    ErrorMsg<'a>,
+    Error,
+    |r| {
+        let code = ErrorCode::from_u16(r.u16()?);
+        let epoch = r.u32()?;
+        let seq = r.u16()?;
+        let text = core::str::from_utf8(r.rest())
+            .map_err(|_| ParseError::Invalid("error text is not UTF-8"))?;
+        Ok(ErrorMsg {
+            code,
+            epoch,
+            seq,
+            text,
+        })
+    },
+    |s, w| {
+        w.u16(s.code as u16)?;
+        w.u32(s.epoch)?;
+        w.u16(s.seq)?;
+        let mut n = s.text.len().min(MAX_ERROR_TEXT);
+        while !s.text.is_char_boundary(n) {
+            n -= 1;
+        }
+        w.bytes(&s.text.as_bytes()[..n])?;
+    }
+);
+
+/// Cumulative acknowledgement: every sequenced packet before `next_expected` arrived.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Ack {
+    pub next_expected: u16,
+    /// Packets the receiver accepts beyond `next_expected`.
+    pub window: u16,
+}
+repr!(
+    Ack,
+    Ack,
+    |r| {
+        Ok(Ack {
+            next_expected: r.u16()?,
+            window: r.u16()?,
+        })
+    },
+    |s, w| {
+        w.u16(s.next_expected)?;
+        w.u16(s.window)?;
+    }
+);
+
+/// Negative acknowledgement: resend from `expected` on (go-back-N).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Nack {
+    pub expected: u16,
+    /// [`nack_reason`].
+    pub reason: u8,
+}
+
+pub mod nack_reason {
+    /// A packet after a gap arrived.
+    pub const GAP: u8 = 1;
+    /// A packet was corrupted.
+    pub const CORRUPTED: u8 = 2;
+    /// The receiver waited too long.
+    pub const TIMEOUT: u8 = 3;
+}
+
+repr!(
+    Nack,
+    Nack,
+    |r| {
+        Ok(Nack {
+            expected: r.u16()?,
+            reason: r.u8()?,
+        })
+    },
+    |s, w| {
+        w.u16(s.expected)?;
+        w.u8(s.reason)?;
+    }
+);
+
+/// Host -> firmware: drop the configuration and any partial epoch; answered by Capabilities.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Reset {
+    pub reason: u8,
+}
+repr!(
+    Reset,
+    Reset,
+    |r| { Ok(Reset { reason: r.u8()? }) },
+    |s, w| {
+        w.u8(s.reason)?;
+    }
+);
+
+/// Any message, parsed by type.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Message<'a> {
+    Hello(Hello),
+    Capabilities(Capabilities),
+    Configure(Configure),
+    ConfigAccepted(ConfigAccepted),
+    FrameBegin(FrameBegin),
+    FrameChunk(FrameChunk<'a>),
+    FrameEnd(FrameEnd),
+    Aux(Aux),
+    Result(EpochResult),
+    Stats(Stats),
+    Error(ErrorMsg<'a>),
+    Ack(Ack),
+    Nack(Nack),
+    Reset(Reset),
+}
+
+impl<'a> Message<'a> {
+    pub fn parse(type_byte: u8, payload: &'a [u8]) -> Result<Self, ParseError> {
+        let t = MessageType::from_u8(type_byte).ok_or(ParseError::UnknownType(type_byte))?;
+        Ok(match t {
+            MessageType::Hello => Message::Hello(Hello::parse(payload)?),
+            MessageType::Capabilities => Message::Capabilities(Capabilities::parse(payload)?),
+            MessageType::Configure => Message::Configure(Configure::parse(payload)?),
+            MessageType::ConfigAccepted => Message::ConfigAccepted(ConfigAccepted::parse(payload)?),
+            MessageType::FrameBegin => Message::FrameBegin(FrameBegin::parse(payload)?),
+            MessageType::FrameChunk => Message::FrameChunk(FrameChunk::parse(payload)?),
+            MessageType::FrameEnd => Message::FrameEnd(FrameEnd::parse(payload)?),
+            MessageType::Aux => Message::Aux(Aux::parse(payload)?),
+            MessageType::Result => Message::Result(EpochResult::parse(payload)?),
+            MessageType::Stats => Message::Stats(Stats::parse(payload)?),
+            MessageType::Error => Message::Error(ErrorMsg::parse(payload)?),
+            MessageType::Ack => Message::Ack(Ack::parse(payload)?),
+            MessageType::Nack => Message::Nack(Nack::parse(payload)?),
+            MessageType::Reset => Message::Reset(Reset::parse(payload)?),
+        })
+    }
+
+    pub fn message_type(&self) -> MessageType {
+        match self {
+            Message::Hello(_) => MessageType::Hello,
+            Message::Capabilities(_) => MessageType::Capabilities,
+            Message::Configure(_) => MessageType::Configure,
+            Message::ConfigAccepted(_) => MessageType::ConfigAccepted,
+            Message::FrameBegin(_) => MessageType::FrameBegin,
+            Message::FrameChunk(_) => MessageType::FrameChunk,
+            Message::FrameEnd(_) => MessageType::FrameEnd,
+            Message::Aux(_) => MessageType::Aux,
+            Message::Result(_) => MessageType::Result,
+            Message::Stats(_) => MessageType::Stats,
+            Message::Error(_) => MessageType::Error,
+            Message::Ack(_) => MessageType::Ack,
+            Message::Nack(_) => MessageType::Nack,
+            Message::Reset(_) => MessageType::Reset,
+        }
+    }
+
+    /// Writes the payload; returns its length.
+    pub fn emit(&self, buf: &mut [u8]) -> Result<usize, EncodeError> {
+        match self {
+            Message::Hello(m) => m.emit(buf),
+            Message::Capabilities(m) => m.emit(buf),
+            Message::Configure(m) => m.emit(buf),
+            Message::ConfigAccepted(m) => m.emit(buf),
+            Message::FrameBegin(m) => m.emit(buf),
+            Message::FrameChunk(m) => m.emit(buf),
+            Message::FrameEnd(m) => m.emit(buf),
+            Message::Aux(m) => m.emit(buf),
+            Message::Result(m) => m.emit(buf),
+            Message::Stats(m) => m.emit(buf),
+            Message::Error(m) => m.emit(buf),
+            Message::Ack(m) => m.emit(buf),
+            Message::Nack(m) => m.emit(buf),
+            Message::Reset(m) => m.emit(buf),
+        }
+    }
+}

@@ -1,0 +1,524 @@
+//! Protocol tests: message round trips, decoder resynchronisation, frame
+//! assembly, and property tests feeding random and mutated streams to the decoder.
+extern crate std;
+
+use super::assembly::{AssemblyError, FrameAssembler};
+use super::crc::crc32;
+use super::messages::*;
+use super::*;
+use crate::camera::{Interior, Rig};
+
+fn sample_messages(chunk: &[u8]) -> [Message<'_>; 14] {
+    let rig = Rig::rectified(Interior::pinhole_px(640, 480, 700.0), 0.54);
+    [
+        Message::Hello(Hello {
+            session: 0xDEAD_BEEF,
+            host_version: [0, 1, 2],
+        }),
+        Message::Capabilities(Capabilities {
+            firmware_version: [0, 1, 0],
+            protocol_version: PROTOCOL_VERSION,
+            max_payload: MAX_PAYLOAD as u16,
+            rx_window: 32,
+            max_width: 1280,
+            max_height: 1024,
+            pixel_formats: 3,
+            processor: processor_kind::SIFT,
+            max_keypoints: 4000,
+            work_bytes: 16 << 20,
+            link_bytes: 40_000,
+        }),
+        Message::Configure(Configure {
+            version: CONFIG_VERSION,
+            rig,
+            pipeline: Pipeline::default(),
+        }),
+        Message::ConfigAccepted(ConfigAccepted {
+            predicted_bytes: 1,
+            frame_bytes: 2,
+            capacity_bytes: 3,
+        }),
+        Message::FrameBegin(FrameBegin {
+            epoch: 7,
+            camera: Camera::Right,
+            format: PixelFormat::Gray16 { bits: 12 },
+            width: 640,
+            height: 480,
+            timestamp_us: 123_456_789_012,
+        }),
+        Message::FrameChunk(FrameChunk {
+            epoch: 7,
+            camera: Camera::Left,
+            offset: 4096,
+            data: chunk,
+        }),
+        Message::FrameEnd(FrameEnd {
+            epoch: 7,
+            camera: Camera::Left,
+            total_bytes: 307_200,
+            crc32: 0x1234_5678,
+        }),
+        Message::Aux(Aux {
+            epoch: 7,
+            flags: AUX_ODOMETER | AUX_GNSS,
+            odometer_m: 1.25,
+            odometer_sigma_m: 0.01,
+            gnss_m: [1.0, 2.0, 3.0],
+            gnss_sigma_m: [0.1, 0.2, 0.3],
+        }),
+        Message::Result(EpochResult {
+            epoch: 7,
+            status: status::OK,
+            pose: [1.5, 0.1, -0.2, 3.0, 40.0, 1.6],
+            sigma: [1e-4; 6],
+            sigma0: 0.9,
+            counts: Counts {
+                keypoints: [900, 880],
+                stereo_matches: 400,
+                temporal_matches: 300,
+                tie_points: 250,
+                observations: 1000,
+                dropped: 3,
+            },
+            extra: [1.0, 2.0, 3.0, 4.0],
+        }),
+        Message::Stats(Stats {
+            epoch: 7,
+            timings_us: [1, 2, 3, 4, 5, 6, 7, 28],
+            memory_predicted: 100,
+            memory_high_water: 90,
+            memory_capacity: 1000,
+            epochs_ok: 7,
+            epochs_lost: 1,
+            link: LinkCounters {
+                packets_ok: 9,
+                crc_errors: 1,
+                retransmissions: 2,
+                ..Default::default()
+            },
+        }),
+        Message::Error(ErrorMsg {
+            code: ErrorCode::ChunkOutOfOrder,
+            epoch: 7,
+            seq: 99,
+            text: "chunk at 10, expected 0",
+        }),
+        Message::Ack(Ack {
+            next_expected: 65535,
+            window: 32,
+        }),
+        Message::Nack(Nack {
+            expected: 3,
+            reason: nack_reason::GAP,
+        }),
+        Message::Reset(Reset { reason: 1 }),
+    ]
+}
+
+fn encode(msg: &Message, seq: u16, out: &mut [u8]) -> usize {
+    let mut raw = [0u8; MAX_PACKET];
+    encode_packet(
+        Header {
+            message: msg.message_type(),
+            seq,
+        },
+        &mut raw,
+        out,
+        |p| msg.emit(p),
+    )
+    .unwrap()
+}
+
+#[test]
+fn every_message_round_trips_through_the_wire() {
+    let chunk: [u8; 300] = core::array::from_fn(|i| (i % 7) as u8);
+    let mut buf = [0u8; MAX_ENCODED];
+    let mut wire = [0u8; MAX_ENCODED];
+    for (k, msg) in sample_messages(&chunk).iter().enumerate() {
+        let n = encode(msg, 1000 + k as u16, &mut wire);
+        assert_eq!(wire[n - 1], 0);
+        assert!(!wire[..n - 1].contains(&0));
+        let mut dec = Decoder::new(&mut buf);
+        let (used, ev) = dec.feed(&wire[..n]);
+        assert_eq!(used, n);
+        let p = ev.unwrap().unwrap();
+        assert_eq!(p.seq(), 1000 + k as u16);
+        assert_eq!(p.message_type(), Some(msg.message_type()));
+        let back = Message::parse(p.type_byte(), p.payload()).unwrap();
+        assert_eq!(&back, msg);
+    }
+}
+
+#[test]
+fn truncated_payloads_are_refused_not_panicking() {
+    let chunk = [1u8; 4];
+    let mut payload = [0u8; MAX_PAYLOAD];
+    for msg in sample_messages(&chunk).iter() {
+        let n = msg.emit(&mut payload).unwrap();
+        for cut in 0..n {
+            let r = Message::parse(msg.message_type() as u8, &payload[..cut]);
+            // Chunk data and error text may legally be shorter; every fixed field must be there.
+            if !matches!(msg, Message::FrameChunk(_) | Message::Error(_)) {
+                assert_eq!(
+                    r,
+                    Err(ParseError::Truncated),
+                    "{:?} cut at {cut}",
+                    msg.message_type()
+                );
+            }
+        }
+    }
+    assert_eq!(
+        Message::parse(0x7F, &[]),
+        Err(ParseError::UnknownType(0x7F))
+    );
+}
+
+#[test]
+fn configure_ignores_fields_of_later_versions() {
+    let rig = Rig::rectified(Interior::pinhole_px(320, 240, 300.0), 0.3);
+    let cfg = Configure {
+        version: 2,
+        rig,
+        pipeline: Pipeline::default(),
+    };
+    let mut payload = [0u8; 512];
+    let n = cfg.emit(&mut payload).unwrap();
+    payload[n..n + 8].copy_from_slice(&[9; 8]);
+    assert_eq!(Configure::parse(&payload[..n + 8]).unwrap(), cfg);
+}
+
+#[test]
+fn decoder_resynchronises_after_garbage_and_counts() {
+    let mut wire = [0u8; 3 * MAX_ENCODED];
+    let ack = Message::Ack(Ack {
+        next_expected: 5,
+        window: 8,
+    });
+    let mut at = 0;
+    at += encode(&ack, 1, &mut wire[at..]);
+    // Garbage, a corrupted packet, an oversized run, then a good packet.
+    wire[at..at + 5].copy_from_slice(&[1, 2, 3, 4, 0]);
+    at += 5;
+    let n = encode(&ack, 2, &mut wire[at..]);
+    wire[at + 3] ^= 0x10;
+    at += n;
+    let mut small = [0u8; 40];
+    let big = [0x55u8; 100];
+    let mut stream = heapless::Vec::<u8, 4096>::new();
+    stream.extend_from_slice(&wire[..at]).unwrap();
+    stream.extend_from_slice(&big).unwrap();
+    stream.push(0).unwrap();
+    let n = encode(&ack, 3, &mut wire);
+    stream.extend_from_slice(&wire[..n]).unwrap();
+
+    let mut dec = Decoder::new(&mut small);
+    let mut input = &stream[..];
+    let mut good = heapless::Vec::<u16, 8>::new();
+    let mut bad = 0;
+    // Feed byte by byte: the decoder must not depend on how reads are split.
+    while !input.is_empty() {
+        let (n, ev) = dec.feed(&input[..1]);
+        assert_eq!(n, 1);
+        input = &input[1..];
+        match ev {
+            Some(Ok(p)) => good.push(p.seq()).unwrap(),
+            Some(Err(_)) => bad += 1,
+            None => {}
+        }
+    }
+    assert_eq!(&good[..], &[1, 3]);
+    assert_eq!(bad, 3);
+    let c = dec.counters();
+    assert_eq!((c.packets, c.oversized), (2, 1));
+    assert_eq!(c.crc_errors + c.framing_errors + c.truncated, 2);
+}
+
+#[test]
+fn wrong_version_is_reported_as_such() {
+    let mut raw = [0u8; 64];
+    let mut wire = [0u8; 80];
+    let n = encode_packet(
+        Header {
+            message: MessageType::Reset,
+            seq: 0,
+        },
+        &mut raw,
+        &mut wire,
+        |p| Reset { reason: 0 }.emit(p),
+    )
+    .unwrap();
+    // Rewrite the version and fix the CRC so only the version is wrong.
+    let len = HEADER_LEN + 1;
+    raw[0] = 9;
+    let crc = crc32(&raw[..len]);
+    raw[len..len + 4].copy_from_slice(&crc.to_le_bytes());
+    let m = cobs::encode(&raw[..len + 4], &mut wire).unwrap();
+    wire[m] = 0;
+    assert!(n > 0);
+    let mut buf = [0u8; 80];
+    let mut dec = Decoder::new(&mut buf);
+    let (_, ev) = dec.feed(&wire[..=m]);
+    assert_eq!(
+        ev.unwrap().unwrap_err(),
+        DecodeError::Packet(PacketError::Version(9))
+    );
+}
+
+fn begin(epoch: u32, w: u16, h: u16, format: PixelFormat) -> FrameBegin {
+    FrameBegin {
+        epoch,
+        camera: Camera::Left,
+        format,
+        width: w,
+        height: h,
+        timestamp_us: 0,
+    }
+}
+
+#[test]
+fn assembler_builds_checks_and_scales_frames() {
+    let mut buf = [0u8; 2 * 8 * 4];
+    let mut a = FrameAssembler::new(&mut buf, 8, 4);
+    let img: [u8; 32] = core::array::from_fn(|i| i as u8 * 3);
+    assert_eq!(a.begin(begin(1, 8, 4, PixelFormat::Gray8)), Ok(None));
+    for (k, part) in img.chunks(10).enumerate() {
+        a.chunk(&FrameChunk {
+            epoch: 1,
+            camera: Camera::Left,
+            offset: k as u32 * 10,
+            data: part,
+        })
+        .unwrap();
+    }
+    a.end(&FrameEnd {
+        epoch: 1,
+        camera: Camera::Left,
+        total_bytes: 32,
+        crc32: crc32(&img),
+    })
+    .unwrap();
+    let (view, _) = a.image(1).unwrap();
+    assert_eq!(view.get(7, 3), Some(31 * 3));
+
+    // u16 with 12 significant bits scaled to 8.
+    let px: [u16; 32] = core::array::from_fn(|i| (i as u16) << 7);
+    let mut bytes = [0u8; 64];
+    for (i, v) in px.iter().enumerate() {
+        bytes[2 * i..2 * i + 2].copy_from_slice(&v.to_le_bytes());
+    }
+    a.begin(begin(2, 8, 4, PixelFormat::Gray16 { bits: 12 }))
+        .unwrap();
+    a.chunk(&FrameChunk {
+        epoch: 2,
+        camera: Camera::Left,
+        offset: 0,
+        data: &bytes,
+    })
+    .unwrap();
+    a.end(&FrameEnd {
+        epoch: 2,
+        camera: Camera::Left,
+        total_bytes: 64,
+        crc32: crc32(&bytes),
+    })
+    .unwrap();
+    let (view, _) = a.image(2).unwrap();
+    assert_eq!(view.get(5, 2), Some(((21u16 << 7) >> 4) as u8));
+
+    // Out of order, then the rest of that frame is ignored, not re-reported.
+    a.begin(begin(3, 8, 4, PixelFormat::Gray8)).unwrap();
+    let c = FrameChunk {
+        epoch: 3,
+        camera: Camera::Left,
+        offset: 10,
+        data: &img[10..20],
+    };
+    assert_eq!(
+        a.chunk(&c),
+        Err(AssemblyError::OutOfOrder {
+            expected: 0,
+            got: 10
+        })
+    );
+    assert_eq!(a.chunk(&c), Err(AssemblyError::AlreadyFailed));
+    assert!(a.image(3).is_none());
+
+    // Too large for the buffer; CRC mismatch; abandoned epoch.
+    assert!(matches!(
+        a.begin(begin(4, 9, 4, PixelFormat::Gray8)),
+        Err(AssemblyError::TooLarge { .. })
+    ));
+    a.begin(begin(5, 8, 4, PixelFormat::Gray8)).unwrap();
+    a.chunk(&FrameChunk {
+        epoch: 5,
+        camera: Camera::Left,
+        offset: 0,
+        data: &img,
+    })
+    .unwrap();
+    assert!(matches!(
+        a.end(&FrameEnd {
+            epoch: 5,
+            camera: Camera::Left,
+            total_bytes: 32,
+            crc32: 1
+        }),
+        Err(AssemblyError::Crc { .. })
+    ));
+    a.begin(begin(6, 8, 4, PixelFormat::Gray8)).unwrap();
+    assert_eq!(a.begin(begin(7, 8, 4, PixelFormat::Gray8)), Ok(Some(6)));
+}
+
+mod properties {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Feeds `stream` in pieces of `split` bytes; every outcome must be handled
+    /// without panic and every packet returned must be internally consistent.
+    pub(crate) fn feed_all(buf: &mut [u8], stream: &[u8], split: usize) -> (u32, u32) {
+        let cap = buf.len();
+        let mut dec = Decoder::new(buf);
+        let mut input = stream;
+        let (mut ok, mut bad) = (0, 0);
+        while !input.is_empty() {
+            let take = split.clamp(1, input.len());
+            let mut piece = &input[..take];
+            input = &input[take..];
+            while !piece.is_empty() {
+                let (n, ev) = dec.feed(piece);
+                assert!(n >= 1 && n <= piece.len());
+                piece = &piece[n..];
+                match ev {
+                    Some(Ok(p)) => {
+                        ok += 1;
+                        assert!(p.payload().len() <= MAX_PAYLOAD && p.payload().len() < cap);
+                        // Whatever parses must re-emit to the same payload length or less.
+                        if let Ok(m) = Message::parse(p.type_byte(), p.payload()) {
+                            let mut out = [0u8; MAX_PAYLOAD];
+                            let _ = m.emit(&mut out);
+                        }
+                    }
+                    Some(Err(_)) => bad += 1,
+                    None => {}
+                }
+            }
+        }
+        (ok, bad)
+    }
+
+    fn valid_stream(seed: u64, count: usize, out: &mut heapless::Vec<u8, 8192>) {
+        let chunk: [u8; 64] = core::array::from_fn(|i| (seed as usize + i) as u8);
+        let msgs = sample_messages(&chunk);
+        let mut wire = [0u8; MAX_ENCODED];
+        for k in 0..count {
+            let m = &msgs[(seed as usize + k) % msgs.len()];
+            let n = encode(m, k as u16, &mut wire);
+            if out.extend_from_slice(&wire[..n]).is_err() {
+                break;
+            }
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 3000, ..ProptestConfig::default() })]
+
+        #[test]
+        fn random_bytes_never_panic(stream in proptest::collection::vec(any::<u8>(), 0..600), split in 1usize..64, cap in 1usize..300) {
+            let mut buf = [0u8; 300];
+            feed_all(&mut buf[..cap], &stream, split);
+        }
+
+        #[test]
+        fn mutated_valid_streams_keep_good_packets(seed in any::<u64>(), flips in proptest::collection::vec((any::<u16>(), any::<u8>()), 0..6), split in 1usize..200) {
+            let mut s = heapless::Vec::<u8, 8192>::new();
+            valid_stream(seed, 6, &mut s);
+            let clean = s.clone();
+            let mut touched = 0;
+            for (pos, mask) in flips {
+                let i = pos as usize % s.len();
+                if mask != 0 { s[i] ^= mask; touched += 1; }
+            }
+            let mut buf = [0u8; MAX_ENCODED];
+            let (ok, bad) = feed_all(&mut buf, &s, split);
+            // Each corruption costs at most the two packets around it.
+            prop_assert!(ok + 2 * touched >= 6, "ok {} touched {}", ok, touched);
+            let _ = bad;
+            let (ok_clean, bad_clean) = feed_all(&mut buf, &clean, split);
+            prop_assert_eq!((ok_clean, bad_clean), (6, 0));
+        }
+    }
+}
+
+/// The million-stream fuzz run reported for issue 6 (release mode, about a minute):
+/// `cargo test -p phototraverse-core --release decoder_million -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn decoder_million_random_and_mutated_streams() {
+    use rand_free::XorShift;
+    let mut rng = XorShift(0x9E37_79B9_7F4A_7C15);
+    let chunk: [u8; 200] = core::array::from_fn(|i| i as u8);
+    let msgs = sample_messages(&chunk);
+    let mut encoded = [[0u8; 600]; 14];
+    let mut lens = [0usize; 14];
+    for (k, m) in msgs.iter().enumerate() {
+        lens[k] = encode(m, k as u16, &mut encoded[k]);
+    }
+    let mut buf = [0u8; MAX_ENCODED];
+    let mut stream = [0u8; 2048];
+    let (mut total_ok, mut total_bad) = (0u64, 0u64);
+    const STREAMS: u32 = 1_000_000;
+    for s in 0..STREAMS {
+        let len = (rng.next() % 2048) as usize;
+        if s % 2 == 0 {
+            for b in stream[..len].iter_mut() {
+                *b = rng.next() as u8;
+            }
+        } else {
+            // Valid packets concatenated, then mutated: flips, deletions, truncation.
+            let mut at = 0;
+            while at < len {
+                let k = (rng.next() % 14) as usize;
+                let n = lens[k].min(len - at);
+                stream[at..at + n].copy_from_slice(&encoded[k][..n]);
+                at += n;
+            }
+            for _ in 0..rng.next() % 6 {
+                let i = (rng.next() as usize) % len.max(1);
+                if len > 0 {
+                    stream[i] ^= 1 << (rng.next() % 8);
+                }
+            }
+            if len > 0 && rng.next() % 3 == 1 {
+                let i = (rng.next() as usize) % len;
+                stream.copy_within(i + 1..len, i);
+            }
+        }
+        let split = 1 + (rng.next() % 300) as usize;
+        let cap = if s % 7 == 0 {
+            1 + (rng.next() % 512) as usize
+        } else {
+            MAX_ENCODED
+        };
+        let (ok, bad) = properties::feed_all(&mut buf[..cap], &stream[..len], split);
+        total_ok += ok as u64;
+        total_bad += bad as u64;
+    }
+    std::println!(
+        "decoder fuzz: {STREAMS} streams, {total_ok} packets accepted, {total_bad} dropped"
+    );
+    assert!(total_ok > 0 && total_bad > 0);
+}
+
+mod rand_free {
+    /// xorshift64: a dependency-free generator for the long fuzz run.
+    pub struct XorShift(pub u64);
+    impl XorShift {
+        pub fn next(&mut self) -> u64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            self.0
+        }
+    }
+}

@@ -1,0 +1,460 @@
+//! The firmware's protocol loop: idle until configured, then assemble the
+//! frames of each epoch into buffers carved from the arena, run the processor
+//! on every complete epoch and answer results and statistics. A bad frame
+//! costs its epoch (an Error and a LOST result), never the session.
+use crate::link::{Flow, Link, LinkBuffers, Served, Tx, RX_WINDOW};
+use crate::processor::{BuildError, Clock, EpochInput, EpochProcessor, ProcessorFactory};
+use embedded_io::{Read, Write};
+use phototraverse_core::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget};
+use phototraverse_core::protocol::assembly::{AssemblyError, FrameAssembler};
+use phototraverse_core::protocol::messages::{
+    stage, status, Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult, ErrorCode,
+    Message, Stats,
+};
+use phototraverse_core::protocol::{MAX_PAYLOAD, PROTOCOL_VERSION};
+
+/// Firmware version reported in the capabilities.
+pub const FIRMWARE_VERSION: [u8; 3] = [0, 1, 0];
+
+/// What the firmware accepts, whatever its memory.
+#[derive(Debug, Clone, Copy)]
+pub struct Limits {
+    pub max_width: u16,
+    pub max_height: u16,
+    pub max_keypoints: u32,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            max_width: 4096,
+            max_height: 4096,
+            max_keypoints: 20_000,
+        }
+    }
+}
+
+/// Where a configured phase goes next.
+// No allocator to box into: the configuration moves by value once per phase.
+#[allow(clippy::large_enum_variant)]
+enum Next {
+    Configure(Configure),
+    Idle,
+    Eof,
+}
+
+/// The firmware: its working storage, processor factory, clock and limits.
+pub struct Firmware<'w, F, C> {
+    work: &'w mut [u8],
+    factory: F,
+    clock: C,
+    limits: Limits,
+}
+
+impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
+    pub fn new(work: &'w mut [u8], factory: F, clock: C, limits: Limits) -> Self {
+        Firmware {
+            work,
+            factory,
+            clock,
+            limits,
+        }
+    }
+
+    pub fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            firmware_version: FIRMWARE_VERSION,
+            protocol_version: PROTOCOL_VERSION,
+            max_payload: MAX_PAYLOAD as u16,
+            rx_window: RX_WINDOW,
+            max_width: self.limits.max_width,
+            max_height: self.limits.max_height,
+            pixel_formats: 0b11,
+            processor: F::KIND,
+            max_keypoints: self.limits.max_keypoints,
+            work_bytes: self.work.len().min(u32::MAX as usize) as u32,
+            link_bytes: LinkBuffers::BYTES as u32,
+        }
+    }
+
+    /// Serves the port until it ends.
+    pub fn run<P: Read + Write>(
+        &mut self,
+        port: &mut P,
+        buffers: &mut LinkBuffers,
+    ) -> Result<(), P::Error> {
+        let mut link = Link::new(buffers);
+        let mut pending = None;
+        loop {
+            let config = match pending.take() {
+                Some(c) => c,
+                None => match self.idle(port, &mut link)? {
+                    Some(c) => c,
+                    None => return Ok(()),
+                },
+            };
+            match self.configured(port, &mut link, &config)? {
+                Next::Configure(c) => pending = Some(c),
+                Next::Idle => {}
+                Next::Eof => return Ok(()),
+            }
+        }
+    }
+
+    /// Without a configuration: answer hello/reset, refuse frames.
+    fn idle<P: Read + Write>(
+        &mut self,
+        port: &mut P,
+        link: &mut Link,
+    ) -> Result<Option<Configure>, P::Error> {
+        let caps = self.capabilities();
+        let mut refused = None;
+        let served = link.serve(port, |tx, port, seq, msg| {
+            match msg {
+                Message::Hello(_) | Message::Reset(_) => {
+                    tx.send(port, &Message::Capabilities(caps))?
+                }
+                Message::Configure(c) => return Ok(Flow::Exit(c)),
+                Message::FrameBegin(b) if refused != Some(b.epoch) => {
+                    refused = Some(b.epoch);
+                    tx.error(
+                        port,
+                        ErrorCode::NotConfigured,
+                        b.epoch,
+                        seq,
+                        format_args!("frame before a configuration"),
+                    )?;
+                }
+                Message::FrameBegin(_)
+                | Message::FrameChunk(_)
+                | Message::FrameEnd(_)
+                | Message::Aux(_) => {}
+                other => unexpected(tx, port, seq, &other)?,
+            }
+            Ok(Flow::Continue)
+        })?;
+        Ok(match served {
+            Served::Exit(c) => Some(c),
+            Served::Eof => None,
+        })
+    }
+
+    /// Checks limits and memory, carves buffers, then serves epochs.
+    fn configured<P: Read + Write>(
+        &mut self,
+        port: &mut P,
+        link: &mut Link,
+        config: &Configure,
+    ) -> Result<Next, P::Error> {
+        let p = &config.pipeline;
+        if let Err(text) = self.check_limits(config) {
+            link.tx.error(
+                port,
+                ErrorCode::ConfigInvalid,
+                u32::MAX,
+                u16::MAX,
+                format_args!("{text}"),
+            )?;
+            return Ok(Next::Idle);
+        }
+        let frame = p.max_width as usize * p.max_height as usize * p.pixel_bytes as usize;
+        let mut budget = MemoryBudget::new();
+        budget.add(
+            "firmware.frame_left",
+            ComponentKind::Frame,
+            slice_bytes::<u8>(frame),
+        );
+        budget.add(
+            "firmware.frame_right",
+            ComponentKind::Frame,
+            slice_bytes::<u8>(frame),
+        );
+        self.factory.budget(config, &mut budget);
+        let capacity = self.work.len();
+        if budget.total() > capacity {
+            link.tx.error(
+                port,
+                ErrorCode::ConfigTooLarge,
+                u32::MAX,
+                u16::MAX,
+                format_args!(
+                    "configuration needs {} bytes ({} for frames) but the firmware has {}",
+                    budget.total(),
+                    budget.total_of(ComponentKind::Frame),
+                    capacity
+                ),
+            )?;
+            return Ok(Next::Idle);
+        }
+        let caps = self.capabilities();
+        let Firmware {
+            work,
+            factory,
+            clock,
+            ..
+        } = self;
+        let mut arena = Arena::new(work);
+        let built = (|| {
+            let left = arena.alloc_slice::<u8>(frame)?;
+            let right = arena.alloc_slice::<u8>(frame)?;
+            let processor = factory.build(config, &mut arena)?;
+            Ok::<_, BuildError>((left, right, processor))
+        })();
+        let (left, right, processor) = match built {
+            Ok(b) => b,
+            Err(e) => {
+                let code = match e {
+                    BuildError::OutOfMemory(_) => ErrorCode::ConfigTooLarge,
+                    BuildError::Invalid(_) => ErrorCode::ConfigInvalid,
+                };
+                link.tx.error(
+                    port,
+                    code,
+                    u32::MAX,
+                    u16::MAX,
+                    format_args!("processor: {e:?}"),
+                )?;
+                return Ok(Next::Idle);
+            }
+        };
+        let used = arena.used();
+        let accepted = ConfigAccepted {
+            predicted_bytes: budget.total() as u32,
+            frame_bytes: 2 * frame as u32,
+            capacity_bytes: capacity as u32,
+        };
+        link.tx.send(port, &Message::ConfigAccepted(accepted))?;
+        let mut epochs = Epochs {
+            frames: [
+                FrameAssembler::new(left, p.max_width, p.max_height),
+                FrameAssembler::new(right, p.max_width, p.max_height),
+            ],
+            processor,
+            caps,
+            clock: &*clock,
+            aux: None,
+            lost: [u32::MAX; 4],
+            lost_at: 0,
+            started_us: 0,
+            ok: 0,
+            lost_count: 0,
+            predicted: budget.total() as u32,
+            high_water: used as u32,
+            capacity: capacity as u32,
+        };
+        let served = link.serve(port, |tx, port, seq, msg| epochs.handle(tx, port, seq, msg))?;
+        Ok(match served {
+            Served::Exit(n) => n,
+            Served::Eof => Next::Eof,
+        })
+    }
+
+    fn check_limits(&self, config: &Configure) -> Result<(), &'static str> {
+        let p = &config.pipeline;
+        if p.max_width == 0 || p.max_height == 0 {
+            return Err("pipeline max_width and max_height must be positive");
+        }
+        if p.max_width > self.limits.max_width || p.max_height > self.limits.max_height {
+            return Err("pipeline frame size exceeds the firmware's limits");
+        }
+        if !(1..=2).contains(&p.pixel_bytes) {
+            return Err("pixel_bytes must be 1 or 2");
+        }
+        if p.keypoints_per_image > self.limits.max_keypoints {
+            return Err("keypoints_per_image exceeds the firmware's limit");
+        }
+        if config.rig.validate().is_err() {
+            return Err("the rig does not validate (interior orientation or base)");
+        }
+        Ok(())
+    }
+}
+
+fn unexpected<P: Write>(
+    tx: &mut Tx,
+    port: &mut P,
+    seq: u16,
+    msg: &Message,
+) -> Result<(), P::Error> {
+    tx.error(
+        port,
+        ErrorCode::Unexpected,
+        u32::MAX,
+        seq,
+        format_args!("unexpected {:?} message", msg.message_type()),
+    )
+}
+
+/// State of a configured session.
+struct Epochs<'a, 'c, Pr> {
+    frames: [FrameAssembler<'a>; 2],
+    processor: Pr,
+    caps: Capabilities,
+    clock: &'c dyn Clock,
+    aux: Option<Aux>,
+    /// Recently lost epochs (each reported once).
+    lost: [u32; 4],
+    lost_at: usize,
+    started_us: u64,
+    ok: u32,
+    lost_count: u32,
+    predicted: u32,
+    high_water: u32,
+    capacity: u32,
+}
+
+impl<Pr: EpochProcessor> Epochs<'_, '_, Pr> {
+    fn handle<P: Write>(
+        &mut self,
+        tx: &mut Tx,
+        port: &mut P,
+        seq: u16,
+        msg: Message,
+    ) -> Result<Flow<Next>, P::Error> {
+        match msg {
+            Message::Configure(c) => return Ok(Flow::Exit(Next::Configure(c))),
+            Message::Hello(_) | Message::Reset(_) => {
+                // The configuration is dropped; the host configures again after the capabilities.
+                tx.send(port, &Message::Capabilities(self.caps))?;
+                return Ok(Flow::Exit(Next::Idle));
+            }
+            Message::Aux(a) => self.aux = Some(a),
+            Message::FrameBegin(b) => {
+                if b.camera == Camera::Left {
+                    self.started_us = self.clock.now_us();
+                }
+                match self.frames[b.camera.index()].begin(b) {
+                    Ok(Some(abandoned)) => self.lose(
+                        tx,
+                        port,
+                        abandoned,
+                        ErrorCode::EpochIncomplete,
+                        seq,
+                        format_args!("epoch {abandoned} abandoned: epoch {} began first", b.epoch),
+                    )?,
+                    Ok(None) => {}
+                    Err(AssemblyError::TooLarge { bytes, capacity }) => self.lose(
+                        tx,
+                        port,
+                        b.epoch,
+                        ErrorCode::FrameTooLarge,
+                        seq,
+                        format_args!(
+                            "frame {}x{} ({bytes} bytes) exceeds the configured capacity ({capacity} bytes)",
+                            b.width, b.height
+                        ),
+                    )?,
+                    Err(e) => self.lose(tx, port, b.epoch, ErrorCode::Other, seq, format_args!("{e:?}"))?,
+                }
+            }
+            Message::FrameChunk(c) => match self.frames[c.camera.index()].chunk(&c) {
+                Ok(()) | Err(AssemblyError::AlreadyFailed) => {}
+                Err(AssemblyError::OutOfOrder { expected, got }) => self.lose(
+                    tx,
+                    port,
+                    c.epoch,
+                    ErrorCode::ChunkOutOfOrder,
+                    seq,
+                    format_args!(
+                        "chunk of {:?} frame at offset {got}, expected {expected}",
+                        c.camera
+                    ),
+                )?,
+                Err(e) => self.lose(
+                    tx,
+                    port,
+                    c.epoch,
+                    ErrorCode::Unexpected,
+                    seq,
+                    format_args!("chunk: {e:?}"),
+                )?,
+            },
+            Message::FrameEnd(e) => match self.frames[e.camera.index()].end(&e) {
+                Ok(()) => self.try_process(tx, port, e.epoch)?,
+                Err(AssemblyError::AlreadyFailed) => {}
+                Err(err) => self.lose(
+                    tx,
+                    port,
+                    e.epoch,
+                    ErrorCode::FrameCrc,
+                    seq,
+                    format_args!("frame end: {err:?}"),
+                )?,
+            },
+            other => unexpected(tx, port, seq, &other)?,
+        }
+        Ok(Flow::Continue)
+    }
+
+    fn is_lost(&self, epoch: u32) -> bool {
+        self.lost.contains(&epoch)
+    }
+
+    /// Reports an epoch lost once: an Error with the cause and a LOST result.
+    fn lose<P: Write>(
+        &mut self,
+        tx: &mut Tx,
+        port: &mut P,
+        epoch: u32,
+        code: ErrorCode,
+        seq: u16,
+        text: core::fmt::Arguments,
+    ) -> Result<(), P::Error> {
+        if self.is_lost(epoch) {
+            return Ok(());
+        }
+        self.lost[self.lost_at] = epoch;
+        self.lost_at = (self.lost_at + 1) % self.lost.len();
+        self.lost_count += 1;
+        tx.error(port, code, epoch, seq, text)?;
+        tx.send(
+            port,
+            &Message::Result(EpochResult::empty(epoch, status::LOST)),
+        )
+    }
+
+    fn try_process<P: Write>(
+        &mut self,
+        tx: &mut Tx,
+        port: &mut P,
+        epoch: u32,
+    ) -> Result<(), P::Error> {
+        if self.is_lost(epoch)
+            || !self.frames[0].is_complete(epoch)
+            || !self.frames[1].is_complete(epoch)
+        {
+            return Ok(());
+        }
+        let assembled = self.clock.now_us();
+        let (Some((left, lb)), Some((right, rb))) =
+            (self.frames[0].image(epoch), self.frames[1].image(epoch))
+        else {
+            return Ok(());
+        };
+        let aux = self.aux.filter(|a| a.epoch == epoch);
+        let input = EpochInput {
+            epoch,
+            left,
+            right,
+            timestamps_us: [lb.timestamp_us, rb.timestamp_us],
+            aux,
+        };
+        let mut out = self.processor.process(&input, self.clock);
+        let done = self.clock.now_us();
+        out.timings_us[stage::ASSEMBLE] = assembled.saturating_sub(self.started_us) as u32;
+        out.timings_us[stage::TOTAL] = done.saturating_sub(self.started_us) as u32;
+        self.ok += 1;
+        tx.send(port, &Message::Result(out.result))?;
+        let stats = Stats {
+            epoch,
+            timings_us: out.timings_us,
+            memory_predicted: self.predicted,
+            memory_high_water: self.high_water,
+            memory_capacity: self.capacity,
+            epochs_ok: self.ok,
+            epochs_lost: self.lost_count,
+            link: tx.counters,
+        };
+        tx.send(port, &Message::Stats(stats))
+    }
+}

@@ -1,0 +1,122 @@
+//! The firmware as a child process: its stdin and stdout are the link.
+use super::transport::{Incoming, StreamTransport, Transport};
+use anyhow::{bail, Context};
+use std::io::{self, BufRead, BufReader, BufWriter};
+use std::path::PathBuf;
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::time::Duration;
+
+/// Name of the firmware binary.
+pub const FIRMWARE_BIN: &str = "phototraverse-firmware-sim";
+
+/// Where the firmware binary is: `$PHOTOTRAVERSE_FIRMWARE`, else next to the
+/// running executable (or one level up, for test binaries in `deps/`).
+pub fn firmware_binary() -> anyhow::Result<PathBuf> {
+    if let Some(p) = std::env::var_os("PHOTOTRAVERSE_FIRMWARE") {
+        return Ok(PathBuf::from(p));
+    }
+    let exe = std::env::current_exe().context("locating the running executable")?;
+    let name = format!("{FIRMWARE_BIN}{}", std::env::consts::EXE_SUFFIX);
+    for dir in exe.ancestors().skip(1).take(2) {
+        let candidate = dir.join(&name);
+        if candidate.is_file() {
+            return Ok(candidate);
+        }
+    }
+    bail!(
+        "cannot find the firmware binary {name} next to {}; build it (cargo build -p phototraverse-firmware-sim) \
+         or set PHOTOTRAVERSE_FIRMWARE",
+        exe.display()
+    )
+}
+
+/// Arguments passed to every spawned firmware.
+pub fn firmware_args(memory: usize) -> Vec<String> {
+    vec!["--memory".into(), memory.to_string()]
+}
+
+/// Kills the child when the link is dropped, after closing its input.
+pub struct ChildGuard(pub Child);
+
+impl Drop for ChildGuard {
+    fn drop(&mut self) {
+        // Give the firmware a moment to see end of input, then make sure it is gone.
+        for _ in 0..20 {
+            if let Ok(Some(_)) = self.0.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// The child-process transport.
+pub struct ChildLink {
+    inner: StreamTransport<BufWriter<ChildStdin>>,
+    _child: ChildGuard,
+}
+
+impl ChildLink {
+    pub fn spawn(memory: usize) -> anyhow::Result<Self> {
+        let bin = firmware_binary()?;
+        let mut child = Command::new(&bin)
+            .args(firmware_args(memory))
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .with_context(|| format!("starting the firmware {}", bin.display()))?;
+        let stdin = child.stdin.take().context("firmware stdin")?;
+        let stdout = child.stdout.take().context("firmware stdout")?;
+        Ok(ChildLink {
+            inner: StreamTransport {
+                writer: BufWriter::with_capacity(64 * 1024, stdin),
+                incoming: Incoming::spawn(stdout, "child"),
+                name: format!("child process {}", bin.display()),
+            },
+            _child: ChildGuard(child),
+        })
+    }
+}
+
+impl Transport for ChildLink {
+    fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
+        self.inner.send(bytes)
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        self.inner.flush()
+    }
+    fn recv(&mut self, timeout: Duration) -> io::Result<Option<Vec<u8>>> {
+        self.inner.recv(timeout)
+    }
+    fn describe(&self) -> String {
+        self.inner.describe()
+    }
+}
+
+/// Spawns the firmware listening on TCP (an ephemeral 127.0.0.1 port) and
+/// returns the child and the address it printed.
+pub fn spawn_tcp_firmware(memory: usize) -> anyhow::Result<(ChildGuard, String)> {
+    let bin = firmware_binary()?;
+    let mut child = Command::new(&bin)
+        .args(firmware_args(memory))
+        .args(["--tcp", "127.0.0.1:0"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .with_context(|| format!("starting the firmware {}", bin.display()))?;
+    let stdout = child.stdout.take().context("firmware stdout")?;
+    let guard = ChildGuard(child);
+    let mut line = String::new();
+    BufReader::new(stdout)
+        .read_line(&mut line)
+        .context("reading the firmware's listening address")?;
+    let addr = line
+        .trim()
+        .strip_prefix("listening ")
+        .with_context(|| format!("unexpected firmware output {line:?}"))?;
+    Ok((guard, addr.to_string()))
+}

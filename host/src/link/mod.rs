@@ -1,0 +1,164 @@
+//! Host side of the emulated rig link: transports (in-process, child process,
+//! TCP, serial device), bandwidth limit and fault injection, selected by
+//! [`LinkOptions`] (flattened into `phototraverse run`).
+pub mod child;
+pub mod fault;
+pub mod inproc;
+pub mod net;
+pub mod throttle;
+pub mod transport;
+
+pub use fault::{FaultConfig, FaultCounters, Faulty};
+pub use transport::Transport;
+
+use anyhow::{bail, Context};
+use phototraverse_firmware_sim::Limits;
+
+/// Which link carries the protocol.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LinkKind {
+    /// The firmware loop on a thread of this process.
+    InProc,
+    /// The firmware binary as a child process over its stdin/stdout.
+    Child,
+    /// TCP: to `ADDR`, or (no address) to a firmware binary started on 127.0.0.1.
+    Tcp(Option<String>),
+    /// A serial device.
+    Serial(String),
+}
+
+impl std::str::FromStr for LinkKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Ok(match s {
+            "inproc" => LinkKind::InProc,
+            "child" => LinkKind::Child,
+            "tcp" => LinkKind::Tcp(None),
+            _ => {
+                if let Some(a) = s.strip_prefix("tcp:") {
+                    LinkKind::Tcp(Some(a.to_string()))
+                } else if let Some(d) = s.strip_prefix("serial:") {
+                    LinkKind::Serial(d.to_string())
+                } else {
+                    return Err(format!(
+                        "unknown link {s:?}: expected inproc, child, tcp, tcp:ADDR or serial:DEV"
+                    ));
+                }
+            }
+        })
+    }
+}
+
+/// Link options of the rig emulation (flatten into a command with `#[command(flatten)]`).
+#[derive(clap::Args, Debug, Clone)]
+pub struct LinkOptions {
+    /// Link to the firmware: inproc, child (the firmware binary over pipes), tcp (start the
+    /// firmware on 127.0.0.1), tcp:ADDR, serial:DEV.
+    #[arg(long, default_value = "child")]
+    pub link: LinkKind,
+    /// Limit the link to this baud rate (8N1, 10 bits per byte; also the serial device's rate).
+    #[arg(long)]
+    pub baud: Option<u32>,
+    /// Pace epochs at this frame rate (default: as fast as the link goes).
+    #[arg(long)]
+    pub fps: Option<f64>,
+    /// Bit error rate injected on both directions.
+    #[arg(long, default_value_t = 0.0)]
+    pub fault_ber: f64,
+    /// Probability that a packet is dropped (both directions).
+    #[arg(long, default_value_t = 0.0)]
+    pub fault_drop: f64,
+    /// Probability that a single byte is dropped.
+    #[arg(long, default_value_t = 0.0)]
+    pub fault_drop_byte: f64,
+    /// Probability that a packet is truncated.
+    #[arg(long, default_value_t = 0.0)]
+    pub fault_truncate: f64,
+    /// Probability that a packet is duplicated.
+    #[arg(long, default_value_t = 0.0)]
+    pub fault_duplicate: f64,
+    /// Probability that a packet is swapped with the next one.
+    #[arg(long, default_value_t = 0.0)]
+    pub fault_reorder: f64,
+    /// Seed of the fault injection.
+    #[arg(long, default_value_t = 1)]
+    pub fault_seed: u64,
+    /// Working memory of a firmware this link starts, bytes.
+    #[arg(long, default_value_t = 32 << 20)]
+    pub fw_memory: usize,
+    /// Frame payload bytes per chunk packet.
+    #[arg(long, default_value_t = 1024)]
+    pub chunk: usize,
+    /// Seconds without any answer before the firmware is declared unresponsive.
+    #[arg(long, default_value_t = 5.0)]
+    pub link_timeout: f64,
+}
+
+impl Default for LinkOptions {
+    fn default() -> Self {
+        LinkOptions {
+            link: LinkKind::InProc,
+            baud: None,
+            fps: None,
+            fault_ber: 0.0,
+            fault_drop: 0.0,
+            fault_drop_byte: 0.0,
+            fault_truncate: 0.0,
+            fault_duplicate: 0.0,
+            fault_reorder: 0.0,
+            fault_seed: 1,
+            fw_memory: 32 << 20,
+            chunk: 1024,
+            link_timeout: 5.0,
+        }
+    }
+}
+
+impl LinkOptions {
+    pub fn faults(&self) -> FaultConfig {
+        FaultConfig {
+            ber: self.fault_ber,
+            drop_byte: self.fault_drop_byte,
+            drop_packet: self.fault_drop,
+            truncate: self.fault_truncate,
+            duplicate: self.fault_duplicate,
+            reorder: self.fault_reorder,
+            seed: self.fault_seed,
+        }
+    }
+
+    /// Opens the transport with its limiter and injector.
+    pub fn open(&self) -> anyhow::Result<Box<dyn Transport>> {
+        for (name, p) in [
+            ("--fault-ber", self.fault_ber),
+            ("--fault-drop", self.fault_drop),
+            ("--fault-drop-byte", self.fault_drop_byte),
+            ("--fault-truncate", self.fault_truncate),
+            ("--fault-duplicate", self.fault_duplicate),
+            ("--fault-reorder", self.fault_reorder),
+        ] {
+            if !(0.0..=1.0).contains(&p) {
+                bail!("{name} must be a probability in [0, 1], got {p}");
+            }
+        }
+        let base: Box<dyn Transport> = match &self.link {
+            LinkKind::InProc => Box::new(inproc::InProc::spawn(self.fw_memory, Limits::default())),
+            LinkKind::Child => Box::new(child::ChildLink::spawn(self.fw_memory)?),
+            LinkKind::Tcp(None) => Box::new(net::TcpLink::spawn(self.fw_memory)?),
+            LinkKind::Tcp(Some(addr)) => Box::new(net::TcpLink::connect(addr)?),
+            LinkKind::Serial(dev) => Box::new(
+                net::SerialLink::open(dev, self.baud.unwrap_or(921_600)).context("serial link")?,
+            ),
+        };
+        let limited: Box<dyn Transport> = match self.baud {
+            Some(b) if b > 0 => Box::new(throttle::Throttled::new(base, b)),
+            _ => base,
+        };
+        let faults = self.faults();
+        Ok(if faults.is_clean() {
+            limited
+        } else {
+            Box::new(Faulty::new(limited, faults))
+        })
+    }
+}

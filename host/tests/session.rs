@@ -1,0 +1,403 @@
+//! Sessions between the host and the firmware over every transport, with
+//! faults, bad input and an unresponsive firmware.
+use phototraverse_core::camera::{Interior, Rig};
+use phototraverse_core::protocol::crc::crc32;
+use phototraverse_core::protocol::messages::{
+    status, Camera, Configure, ErrorCode, FrameBegin, FrameChunk, FrameEnd, Message, Pipeline,
+    PixelFormat, CONFIG_VERSION,
+};
+use phototraverse_core::protocol::{encode_packet, Header, MAX_PACKET};
+use phototraverse_host::link::inproc::InProc;
+use phototraverse_host::link::net::{Pty, SerialLink, TcpLink};
+use phototraverse_host::link::{child, FaultConfig, Faulty, LinkKind, LinkOptions, Transport};
+use phototraverse_host::session::{EpochFrames, Session, SessionError, SessionOptions};
+use std::io;
+use std::time::Duration;
+
+const W: u16 = 96;
+const H: u16 = 64;
+
+/// A textured test image that changes with the epoch and the camera.
+fn image(epoch: u32, camera: u32, w: u16, h: u16) -> Vec<u8> {
+    let mut v = Vec::with_capacity(w as usize * h as usize);
+    for r in 0..h as u32 {
+        for c in 0..w as u32 {
+            let x = c + 3 * epoch + 5 * camera;
+            v.push(((x * 7 + r * 13) % 251 + (x * r) % 5) as u8);
+        }
+    }
+    v
+}
+
+/// Mean and mean absolute gradient computed here independently of the firmware.
+fn expected_stats(img: &[u8], w: usize, h: usize) -> [f64; 2] {
+    let mean = img.iter().map(|&v| v as f64).sum::<f64>() / (w * h) as f64;
+    let mut g = 0u64;
+    for r in 0..h {
+        for c in 0..w {
+            let v = img[r * w + c] as i32;
+            if c + 1 < w {
+                g += (img[r * w + c + 1] as i32 - v).unsigned_abs() as u64;
+            }
+            if r + 1 < h {
+                g += (img[(r + 1) * w + c] as i32 - v).unsigned_abs() as u64;
+            }
+        }
+    }
+    [mean, g as f64 / (w * h) as f64]
+}
+
+fn config(w: u16, h: u16) -> Configure {
+    let rig = Rig::rectified(Interior::pinhole_px(w as u32, h as u32, 100.0), 0.5);
+    Configure {
+        version: CONFIG_VERSION,
+        rig,
+        pipeline: Pipeline {
+            max_width: w,
+            max_height: h,
+            ..Pipeline::default()
+        },
+    }
+}
+
+fn send_epochs<T: Transport>(s: &mut Session<T>, epochs: std::ops::Range<u32>, w: u16, h: u16) {
+    for e in epochs {
+        let (l, r) = (image(e, 0, w, h), image(e, 1, w, h));
+        let f = EpochFrames {
+            epoch: e,
+            timestamp_us: e as u64 * 100_000,
+            width: w,
+            height: h,
+            format: PixelFormat::Gray8,
+            left: &l,
+            right: &r,
+            aux: None,
+        };
+        s.send_epoch(&f).unwrap();
+    }
+}
+
+/// Checks every epoch's result against the images' statistics.
+fn check_results<T: Transport>(s: &Session<T>, epochs: std::ops::Range<u32>, w: u16, h: u16) {
+    for e in epochs {
+        let r = s
+            .result(e)
+            .unwrap_or_else(|| panic!("no result for epoch {e}"));
+        assert_eq!(r.status, status::STATS_ONLY, "epoch {e}");
+        let l = expected_stats(&image(e, 0, w, h), w as usize, h as usize);
+        let rr = expected_stats(&image(e, 1, w, h), w as usize, h as usize);
+        let want = [l[0], l[1], rr[0], rr[1]];
+        for (k, (got, want)) in r.extra.iter().zip(want).enumerate() {
+            assert!(
+                (got - want).abs() < 1e-9,
+                "epoch {e} value {k}: {got} vs {want}"
+            );
+        }
+        let st = s.stats(e).expect("stats follow each result");
+        assert!(st.memory_high_water as usize >= 2 * w as usize * h as usize);
+        assert!(st.memory_high_water <= st.memory_predicted);
+    }
+}
+
+fn full_session<T: Transport>(t: T, opts: SessionOptions, epochs: u32) -> Session<T> {
+    let mut s = Session::open(t, opts).expect("hello");
+    let acc = s.configure(&config(W, H)).expect("configuration accepted");
+    assert_eq!(acc.frame_bytes, 2 * W as u32 * H as u32);
+    send_epochs(&mut s, 0..epochs, W, H);
+    s.finish().expect("all results");
+    check_results(&s, 0..epochs, W, H);
+    s
+}
+
+fn inproc() -> InProc {
+    InProc::spawn(4 << 20, Default::default())
+}
+
+#[test]
+fn inproc_session_returns_a_result_per_epoch() {
+    let s = full_session(inproc(), SessionOptions::default(), 6);
+    let link = s.link_stats();
+    assert_eq!(link.frame_bytes, 6 * 2 * W as u64 * H as u64);
+    assert_eq!(
+        link.retransmitted_packets, 0,
+        "a clean link needs no retransmission"
+    );
+    assert!(s.errors().is_empty(), "{:?}", s.errors());
+}
+
+#[test]
+fn noisy_link_gives_the_same_results_as_a_clean_one() {
+    let faults = FaultConfig {
+        ber: 1e-4,
+        drop_packet: 0.01,
+        seed: 42,
+        ..Default::default()
+    };
+    let opts = SessionOptions {
+        chunk: 256,
+        rto: Duration::from_millis(50),
+        ..Default::default()
+    };
+    let clean = full_session(inproc(), opts.clone(), 8);
+    let noisy = full_session(Faulty::new(inproc(), faults), opts, 8);
+    for e in 0..8 {
+        assert_eq!(clean.result(e), noisy.result(e), "epoch {e}");
+    }
+    let link = noisy.link_stats();
+    let f = link.faults.expect("fault counters");
+    assert!(f[0].bits_flipped > 0 && f[0].packets_dropped > 0, "{f:?}");
+    assert!(link.retransmitted_packets > 0, "{link:?}");
+    assert!(noisy.lost_epochs().is_empty());
+    println!("noisy link: {link:?}");
+}
+
+#[test]
+fn every_packet_fault_kind_is_survived() {
+    let faults = FaultConfig {
+        ber: 2e-5,
+        drop_packet: 0.01,
+        drop_byte: 1e-5,
+        truncate: 0.01,
+        duplicate: 0.01,
+        reorder: 0.01,
+        seed: 9,
+    };
+    let opts = SessionOptions {
+        chunk: 512,
+        rto: Duration::from_millis(50),
+        ..Default::default()
+    };
+    let s = full_session(Faulty::new(inproc(), faults), opts, 5);
+    let f = s.link_stats().faults.unwrap();
+    let total: u64 = f
+        .iter()
+        .map(|c| c.packets_truncated + c.packets_duplicated + c.packets_reordered)
+        .sum();
+    assert!(total > 0, "{f:?}");
+}
+
+/// Builds the firmware binary when the test runs without it (cargo test -p phototraverse-host).
+fn ensure_firmware_binary() {
+    if child::firmware_binary().is_ok() {
+        return;
+    }
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let ok = std::process::Command::new(cargo)
+        .args([
+            "build",
+            "-p",
+            "phototraverse-firmware-sim",
+            "--bin",
+            child::FIRMWARE_BIN,
+        ])
+        .status()
+        .map(|s| s.success())
+        .unwrap_or(false);
+    assert!(ok, "building the firmware binary");
+    child::firmware_binary().expect("firmware binary after building it");
+}
+
+#[test]
+fn child_process_session() {
+    ensure_firmware_binary();
+    let opts = LinkOptions {
+        link: LinkKind::Child,
+        fw_memory: 1 << 20,
+        ..Default::default()
+    };
+    let t = opts.open().unwrap();
+    full_session(t, SessionOptions::default(), 3);
+}
+
+#[test]
+fn tcp_session_on_localhost() {
+    ensure_firmware_binary();
+    let t = TcpLink::spawn(1 << 20).unwrap();
+    assert!(t.describe().contains("127.0.0.1"));
+    full_session(t, SessionOptions::default(), 3);
+}
+
+/// `std::fs::File` as an `embedded_io` port for the firmware on a pty master.
+struct FilePort(std::fs::File);
+
+impl embedded_io::ErrorType for FilePort {
+    type Error = io::Error;
+}
+impl embedded_io::Read for FilePort {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        match io::Read::read(&mut self.0, buf) {
+            // EIO on a pty master: the other side closed.
+            Err(e) if e.raw_os_error() == Some(5) => Ok(0),
+            other => other,
+        }
+    }
+}
+impl embedded_io::Write for FilePort {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        io::Write::write(&mut self.0, buf)
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
+}
+
+#[test]
+fn serial_session_over_a_pseudo_terminal() {
+    use phototraverse_firmware_sim::{Firmware, ImageStatsFactory, LinkBuffers, NoClock};
+    let pty = Pty::open().unwrap();
+    let master = pty.master.try_clone().unwrap();
+    std::thread::spawn(move || {
+        let mut work = vec![0u8; 1 << 20];
+        let mut buffers = Box::new(LinkBuffers::new());
+        let mut fw = Firmware::new(&mut work, ImageStatsFactory, NoClock, Default::default());
+        let _ = fw.run(&mut FilePort(master), &mut buffers);
+    });
+    let t = SerialLink::open(pty.slave_path.to_str().unwrap(), 921_600).unwrap();
+    full_session(t, SessionOptions::default(), 2);
+}
+
+fn raw_packet(version: u8) -> Vec<u8> {
+    let mut raw = [0u8; MAX_PACKET];
+    let mut wire = vec![0u8; 64];
+    let n = encode_packet(
+        Header {
+            message: phototraverse_core::protocol::MessageType::Reset,
+            seq: 999,
+        },
+        &mut raw,
+        &mut wire,
+        |p| {
+            p[0] = 0;
+            Ok(1)
+        },
+    )
+    .unwrap();
+    // Re-encode with a different version byte and a CRC that matches it.
+    raw[0] = version;
+    let crc = crc32(&raw[..7]);
+    raw[7..11].copy_from_slice(&crc.to_le_bytes());
+    let m = phototraverse_core::protocol::cobs::encode(&raw[..11], &mut wire).unwrap();
+    wire[m] = 0;
+    assert!(n > 0);
+    wire.truncate(m + 1);
+    wire
+}
+
+fn wait_for_error<T: Transport>(s: &mut Session<T>, code: ErrorCode) -> String {
+    let name = format!("{code:?}");
+    for _ in 0..200 {
+        if let Some(e) = s.errors().iter().find(|e| e.code == name) {
+            return e.text.clone();
+        }
+        s.service(Duration::from_millis(10)).unwrap();
+    }
+    panic!("no {name} error; errors: {:?}", s.errors());
+}
+
+#[test]
+fn bad_input_is_refused_clearly_and_the_session_goes_on() {
+    let mut s = Session::open(inproc(), SessionOptions::default()).unwrap();
+
+    // A configuration that does not fit the firmware's 4 MiB.
+    let err = s.configure(&config(4000, 3000)).unwrap_err();
+    let text = err.to_string();
+    assert!(matches!(err, SessionError::ConfigRejected { .. }), "{text}");
+    assert!(
+        text.contains("ConfigTooLarge") && text.contains("24000000"),
+        "{text}"
+    );
+    s.configure(&config(W, H)).unwrap();
+
+    // A packet of another protocol version.
+    s.send_raw(&raw_packet(9)).unwrap();
+    let text = wait_for_error(&mut s, ErrorCode::Version);
+    assert!(text.contains("version 9"), "{text}");
+
+    // A frame larger than the configured capacity: that epoch is lost.
+    let big = vec![7u8; 2 * W as usize * H as usize];
+    let f = EpochFrames {
+        epoch: 100,
+        timestamp_us: 0,
+        width: 2 * W,
+        height: H,
+        format: PixelFormat::Gray8,
+        left: &big,
+        right: &big,
+        aux: None,
+    };
+    s.send_epoch(&f).unwrap();
+    let text = wait_for_error(&mut s, ErrorCode::FrameTooLarge);
+    assert!(text.contains("192x64"), "{text}");
+
+    // A chunk out of order: that epoch is lost.
+    let img = image(0, 0, W, H);
+    let begin = FrameBegin {
+        epoch: 101,
+        camera: Camera::Left,
+        format: PixelFormat::Gray8,
+        width: W,
+        height: H,
+        timestamp_us: 0,
+    };
+    s.send_message(&Message::FrameBegin(begin)).unwrap();
+    s.send_message(&Message::FrameChunk(FrameChunk {
+        epoch: 101,
+        camera: Camera::Left,
+        offset: 512,
+        data: &img[512..1024],
+    }))
+    .unwrap();
+    s.send_message(&Message::FrameEnd(FrameEnd {
+        epoch: 101,
+        camera: Camera::Left,
+        total_bytes: img.len() as u32,
+        crc32: crc32(&img),
+    }))
+    .unwrap();
+    let text = wait_for_error(&mut s, ErrorCode::ChunkOutOfOrder);
+    assert!(text.contains("offset 512, expected 0"), "{text}");
+
+    // The session goes on: good epochs still give results.
+    send_epochs(&mut s, 0..3, W, H);
+    s.finish().unwrap();
+    check_results(&s, 0..3, W, H);
+    assert_eq!(s.result(100).unwrap().status, status::LOST);
+    assert_eq!(s.result(101).unwrap().status, status::LOST);
+    assert_eq!(s.lost_epochs(), vec![100, 101]);
+}
+
+/// A link whose firmware never answers.
+struct Silent;
+
+impl Transport for Silent {
+    fn send(&mut self, _: &[u8]) -> io::Result<()> {
+        Ok(())
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
+    fn recv(&mut self, timeout: Duration) -> io::Result<Option<Vec<u8>>> {
+        std::thread::sleep(timeout);
+        Ok(None)
+    }
+    fn describe(&self) -> String {
+        "a silent link".into()
+    }
+}
+
+#[test]
+fn an_unresponsive_firmware_times_out_with_a_clear_message() {
+    let opts = SessionOptions {
+        timeout: Duration::from_millis(300),
+        ..Default::default()
+    };
+    let err = Session::open(Silent, opts).err().expect("no answer");
+    let text = err.to_string();
+    assert!(matches!(err, SessionError::Timeout { .. }));
+    assert!(
+        text.contains("did not answer")
+            && text.contains("a silent link")
+            && text.contains("capabilities"),
+        "{text}"
+    );
+}
