@@ -17,7 +17,7 @@
 //! ([`TraverseConfig::budget`] predicts it); processing allocates nothing.
 
 pub mod config;
-mod motion;
+pub mod motion;
 pub mod output;
 
 #[cfg(test)]
@@ -321,6 +321,7 @@ impl<'a> Traverse<'a> {
         left: &ImageView,
         right: &ImageView,
         out: &mut EpochOutput,
+        clock: &impl Clock,
     ) -> bool {
         let [fl, fr] = &mut self.features[fill];
         fl.clear();
@@ -331,10 +332,12 @@ impl<'a> Traverse<'a> {
             self.cfg.rig.left.height_px as usize,
         );
         let sized = |v: &ImageView| v.width() == w && v.height() == h;
-        let ok = sized(left)
-            && sized(right)
-            && self.sift.extract(left, fl).is_ok()
-            && self.sift.extract(right, fr).is_ok();
+        let t0 = clock.now_us();
+        let mut ok = sized(left) && sized(right) && self.sift.extract(left, fl).is_ok();
+        let t1 = clock.now_us();
+        ok = ok && self.sift.extract(right, fr).is_ok();
+        out.times.sift_left_us = elapsed(t0, t1);
+        out.times.sift_right_us = elapsed(t1, clock.now_us());
         out.keypoints = [fl.len() as u32, fr.len() as u32];
         if !ok {
             out.flags |= flags::BAD_IMAGE;

@@ -11,6 +11,26 @@ pub(super) fn predict(history: &[Option<Stamped>; 2], time: f64) -> Option<Pose>
     let Some(before) = history[0] else {
         return Some(last.pose);
     };
+    Some(constant_velocity(
+        (&before.pose, before.time),
+        (&last.pose, last.time),
+        time,
+    ))
+}
+
+/// The pose at `time` continuing the motion from `a` to `b` (poses with their times)
+/// at constant velocity in the vehicle's frame; one step per epoch without usable times.
+pub fn constant_velocity(a: (&Pose, f64), b: (&Pose, f64), time: f64) -> Pose {
+    let (before, last) = (
+        Stamped {
+            pose: *a.0,
+            time: a.1,
+        },
+        Stamped {
+            pose: *b.0,
+            time: b.1,
+        },
+    );
     let dt = last.time - before.time;
     // Without usable times, one epoch is one step.
     let s = if dt > 0.0 && (time - last.time).is_finite() && time > last.time {
@@ -26,5 +46,5 @@ pub(super) fn predict(history: &[Option<Stamped>; 2], time: f64) -> Option<Pose>
     let disp = ma * (last.pose.centre_vec() - before.pose.centre_vec()) * s;
     let m = step_rot.matrix() * mb;
     let c = last.pose.centre_vec() + mb.transpose() * disp;
-    Some(Pose::from_rotation(&m, [c[0], c[1], c[2]]))
+    Pose::from_rotation(&m, [c[0], c[1], c[2]])
 }

@@ -1,7 +1,7 @@
 //! Host binary of the firmware: the same no_std loop, its link on stdin/stdout
 //! (default), a TCP socket (`--tcp ADDR`, listening) or a serial device
 //! (`--serial DEV --baud N`).
-use phototraverse_firmware_sim::{Clock, Firmware, ImageStatsFactory, Limits, LinkBuffers};
+use phototraverse_firmware_sim::{Clock, Firmware, Limits, LinkBuffers, TraverseFactory};
 use std::io::{Read, Write};
 use std::time::Instant;
 
@@ -98,7 +98,7 @@ fn serve<R: Read, W: Write>(o: &Options, rx: R, tx: W) -> std::io::Result<()> {
     let mut buffers = Box::new(LinkBuffers::new());
     let mut fw = Firmware::new(
         &mut work,
-        ImageStatsFactory,
+        TraverseFactory,
         StdClock(Instant::now()),
         o.limits,
     );

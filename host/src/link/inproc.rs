@@ -1,7 +1,7 @@
 //! In-process link: the firmware loop on a thread, bytes through channels —
 //! still every byte through the protocol, only the wire is memory.
 use super::transport::Transport;
-use phototraverse_firmware_sim::{Clock, Firmware, ImageStatsFactory, Limits, LinkBuffers};
+use phototraverse_firmware_sim::{Clock, Firmware, Limits, LinkBuffers, TraverseFactory};
 use std::io;
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
 use std::thread::JoinHandle;
@@ -79,12 +79,8 @@ impl InProc {
             .spawn(move || {
                 let mut work = vec![0u8; memory];
                 let mut buffers = Box::new(LinkBuffers::new());
-                let mut fw = Firmware::new(
-                    &mut work,
-                    ImageStatsFactory,
-                    StdClock(Instant::now()),
-                    limits,
-                );
+                let mut fw =
+                    Firmware::new(&mut work, TraverseFactory, StdClock(Instant::now()), limits);
                 let mut port = ChannelPort {
                     rx: fw_rx,
                     tx: fw_tx,
