@@ -115,7 +115,7 @@ pub fn rig_from_calib(
     let right = interior(p1, width, height, "right", path)?;
     // P1 = K [I | -B e1] so P1[0][3] = -fx B (fx of the right camera's matrix).
     let base = -p1[0][3] / p1[0][0];
-    if !(base > 0.0) {
+    if base.is_nan() || base <= 0.0 {
         return Err(DatasetError::BadCamera {
             path: path.to_path_buf(),
             camera: "right",

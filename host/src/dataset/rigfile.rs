@@ -56,7 +56,7 @@ fn camera_from(c: &CameraToml, name: &'static str, path: &Path) -> Result<Interi
         camera: name,
         problem,
     };
-    if !(c.focal_mm > 0.0) {
+    if c.focal_mm.is_nan() || c.focal_mm <= 0.0 {
         return Err(bad(format!(
             "non-positive focal length focal_mm = {}",
             c.focal_mm
@@ -133,7 +133,7 @@ pub fn parse_rig(text: &str, path: &Path) -> Result<(Rig, Pose), DatasetError> {
         path: path.to_path_buf(),
         problem: format!("right_from_left: {e}"),
     })?;
-    if !(rig.base_length() > 0.0) {
+    if rig.base_length().is_nan() || rig.base_length() <= 0.0 {
         return Err(DatasetError::RigFile {
             path: path.to_path_buf(),
             problem: "right_from_left: base_mm is zero".into(),
