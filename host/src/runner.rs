@@ -170,7 +170,12 @@ impl<'d> Run<'d> {
                 };
                 session.send_epoch(&frames)?;
                 let e = i as u32;
-                session.wait_for("the epoch's result", |s| s.result(e).is_some())?;
+                // Statistics follow the result of every epoch the firmware processed.
+                session.wait_for("the epoch's result", |s| {
+                    s.result(e).is_some_and(|r| {
+                        s.stats(e).is_some() || matches!(r.status, status::LOST | status::FAILED)
+                    })
+                })?;
                 let result = *session.result(e).context("result vanished")?;
                 if let Some(st) = session.stats(e) {
                     self.epoch_ms
@@ -225,6 +230,8 @@ impl<'d> Run<'d> {
             chi2_passed: None,
             observations: 0,
             tie_points: 0,
+            keypoints: [0; 2],
+            stereo_matches: 0,
             stage_ms: Default::default(),
         }
     }
@@ -274,6 +281,8 @@ impl<'d> Run<'d> {
             chi2_passed: Some(fl & flags::CHI2 == 0),
             observations: r.counts.observations as usize,
             tie_points: r.counts.temporal_matches as usize,
+            keypoints: r.counts.keypoints,
+            stereo_matches: r.counts.stereo_matches,
             stage_ms,
         }
     }
