@@ -1,5 +1,6 @@
 //! phototraverse host: datasets, synthetic street sequences, evaluation, the
 //! emulated rig link and the CLI's commands.
+pub mod block;
 pub mod commands;
 pub mod dataset;
 pub mod eval;

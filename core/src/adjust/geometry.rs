@@ -86,8 +86,69 @@ pub fn project_rig(
     focal_mm: f64,
     point: &[f64; 3],
 ) -> Result<RigProjection, CameraError> {
-    let (ml, dml) = rotation_with_derivatives(left.omega, left.phi, left.kappa);
-    let d = Vector3::from(*point) - left.centre_vec();
+    let l = Rotations::new(left.omega, left.phi, left.kappa);
+    let r = Rotations::new(rig.angles[0], rig.angles[1], rig.angles[2]);
+    project_with(&l, &left.centre, &r, &rig.base, camera, focal_mm, point)
+}
+
+/// A rotation `M` and its derivatives by omega, phi, kappa, packed column-major
+/// (`[M, dM/dw, dM/dp, dM/dk]`, 9 values each) so a window can cache them per
+/// epoch: the sines and matrix products cost more than the projection itself.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rotations(pub [f64; 36]);
+
+impl Rotations {
+    pub fn new(omega: f64, phi: f64, kappa: f64) -> Self {
+        let (m, d) = rotation_with_derivatives(omega, phi, kappa);
+        let mut out = [0.0; 36];
+        out[..9].copy_from_slice(m.as_slice());
+        for k in 0..3 {
+            out[9 * (k + 1)..9 * (k + 2)].copy_from_slice(d[k].as_slice());
+        }
+        Rotations(out)
+    }
+
+    fn get(&self, k: usize) -> Matrix3<f64> {
+        Matrix3::from_column_slice(&self.0[9 * k..9 * k + 9])
+    }
+}
+
+/// Only the photo-coordinates (no Jacobians) with precomputed rotations;
+/// `None` behind the camera.
+pub fn project_xy(
+    left: &Rotations,
+    centre: &[f64; 3],
+    rel: &Rotations,
+    base: &[f64; 3],
+    camera: Camera,
+    focal_mm: f64,
+    point: &[f64; 3],
+) -> Option<[f64; 2]> {
+    let q = left.get(0) * (Vector3::from(*point) - Vector3::from(*centre));
+    let q = match camera {
+        Camera::Left => q,
+        Camera::Right => rel.get(0) * (q - Vector3::from(*base)),
+    };
+    let (u, v, w) = (q[0], q[1], q[2]);
+    if !(w < -MIN_DEPTH) || !(u.is_finite() && v.is_finite()) {
+        return None;
+    }
+    Some([-focal_mm * u / w, -focal_mm * v / w])
+}
+
+/// [`project_rig`] with precomputed rotations of the left camera and the rig.
+pub fn project_with(
+    left: &Rotations,
+    centre: &[f64; 3],
+    rel: &Rotations,
+    base: &[f64; 3],
+    camera: Camera,
+    focal_mm: f64,
+    point: &[f64; 3],
+) -> Result<RigProjection, CameraError> {
+    let ml = left.get(0);
+    let dml = [left.get(1), left.get(2), left.get(3)];
+    let d = Vector3::from(*point) - Vector3::from(*centre);
     let q = ml * d;
     // Camera-frame point, its derivatives w.r.t. pose angles, centre/point (3x3), rig.
     let (qc, dq_ang, dq_point, dq_rig): (
@@ -103,9 +164,9 @@ pub fn project_rig(
             [Vector3::zeros(); 6],
         ),
         Camera::Right => {
-            let [rw, rp, rk] = rig.angles;
-            let (mr, dmr) = rotation_with_derivatives(rw, rp, rk);
-            let qb = q - Vector3::from(rig.base);
+            let mr = rel.get(0);
+            let dmr = [rel.get(1), rel.get(2), rel.get(3)];
+            let qb = q - Vector3::from(*base);
             (
                 mr * qb,
                 [mr * (dml[0] * d), mr * (dml[1] * d), mr * (dml[2] * d)],

@@ -1,10 +1,8 @@
 //! Intersection, resection and incremental bundle adjustment (issue 5).
 //!
-//! Scalar type: `f64` throughout. The reduced camera system of a window of 8
-//! epochs is at most 54x54 and a Cortex-M7 has a double-precision FPU; in
-//! `f32` the normal equations of a 20 m window lose about 7 of their 7
-//! significant digits (condition numbers of 1e6..1e8 are usual), so `f32`
-//! would cost the millimetre level (see docs/adjustment.md).
+//! Scalar type: `f64` throughout (see docs/adjustment.md): the normal
+//! equations mix weights from 1e5 to 1e12, beyond the 7 digits of `f32`; the
+//! cost is twice the memory and software doubles on an FPU without them.
 //!
 //! Coordinates inside a [`Window`] are relative to a local origin (the first
 //! epoch's left centre when the window is created) so sums of squares never

@@ -943,3 +943,171 @@ fn degenerate_input_errors_or_flags_never_panics() {
         assert_eq!(w.solve(), Err(AdjustError::NoRedundancy));
     }
 }
+
+#[test]
+fn seed_weighting_schemes_and_seed_reweighting() {
+    use super::weighting::{weights, Scheme, SEED_EQUAL_WEIGHT};
+    // Parallax: p_x = pa_x^2, p_y = 1/pa_y^2 (seed 000 L1245-1247).
+    let w = weights(Scheme::Parallax, [2.0, 0.5], Some([1.0, 0.3]));
+    assert!(close(w[0], 1.0, 1e-12) && close(w[1], 25.0, 1e-12));
+    // Zero y-parallax is bounded, never a division by zero.
+    assert!(weights(Scheme::Parallax, [2.0, 0.5], Some([1.0, 0.5]))[1].is_finite());
+    assert!(close(
+        weights(Scheme::Radial, [3.0, 4.0], None)[0],
+        5.0,
+        1e-12
+    ));
+    assert_eq!(
+        weights(Scheme::Equal, [3.0, 4.0], None),
+        [SEED_EQUAL_WEIGHT; 2]
+    );
+    assert!(close(
+        weights(Scheme::Sigma(0.002), [0.0; 2], None)[1],
+        250000.0,
+        1e-12
+    ));
+
+    // Seed 000's re-weighting: residual_x above the pixel size -> weight 1e-5, once.
+    let s = scene(41, 4, 200, 0.05);
+    let cfg = AdjustConfig {
+        window: 4,
+        max_points: 200,
+        max_observations: s.obs.len(),
+        robust: Robust::SeedReweight {
+            threshold_mm: PIXEL_MM,
+        },
+        ..AdjustConfig::default()
+    };
+    let mut mem = arena_for(&cfg);
+    let mut arena = Arena::new(&mut mem);
+    let (mut w, _) = load(&s, cfg, &mut arena, 4);
+    let r = w.solve().unwrap();
+    assert_eq!(r.robust_rounds, 1);
+    let flagged: Vec<usize> = w.flagged().map(|(i, _)| i).collect();
+    assert!(!flagged.is_empty());
+    for &i in &flagged {
+        assert_eq!(
+            w.observations()[i].weight,
+            [super::weighting::SEED_REWEIGHT; 2]
+        );
+    }
+    // Most blunders have an x residual above one pixel.
+    let caught = flagged.iter().filter(|&&i| s.obs[i].4).count();
+    let blunders = s.obs.iter().filter(|o| o.4).count();
+    assert!(
+        caught as f64 >= 0.6 * blunders as f64,
+        "{caught}/{blunders}"
+    );
+}
+
+#[test]
+fn gnss_and_odometer_constraints_enter_the_adjustment() {
+    // GNSS on the first and last epochs only (an outage in between) and odometer legs.
+    let s = scene(51, 6, 150, 0.0);
+    let cfg = AdjustConfig {
+        window: 6,
+        max_points: 150,
+        max_observations: s.obs.len(),
+        sigmas: ConstraintSigmas {
+            velocity_change_mps: 2.0,
+            ..ConstraintSigmas::default()
+        },
+        ..AdjustConfig::default()
+    };
+    let mut mem = arena_for(&cfg);
+    let mut arena = Arena::new(&mut mem);
+    let (mut w, ids) = load(&s, cfg, &mut arena, 52);
+    let mut rng = Rng(53);
+    for e in [0usize, 5] {
+        let c = s.poses[e].centre;
+        let g = [
+            c[0] + 0.02 * rng.normal(),
+            c[1] + 0.02 * rng.normal(),
+            c[2] + 0.02 * rng.normal(),
+        ];
+        w.set_gnss(e as u32, g, 0.02).unwrap();
+    }
+    for e in 1..6 {
+        let (a, b) = (s.poses[e - 1].centre, s.poses[e].centre);
+        let d = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2) + (b[2] - a[2]).powi(2)).sqrt();
+        w.set_odometer(e as u32, d + 0.01 * rng.normal(), 0.01)
+            .unwrap();
+    }
+    assert_eq!(w.set_gnss(9, [0.0; 3], 1.0), Err(AdjustError::Unknown));
+    assert_eq!(w.set_odometer(1, 1.0, 0.0), Err(AdjustError::NotFinite));
+    let r = w.solve().unwrap();
+    // 6 datum + 2 x 3 GNSS + 5 odometer + 4 x 3 smoothness equations.
+    assert_eq!(r.constraints, 6 + 6 + 5 + 12);
+    assert!(r.chi2.passed && (r.sigma0 - 1.0).abs() < 0.1, "{r:?}");
+    let (ok, n) = within(&w, &s, &ids, 3.0);
+    assert!(ok as f64 >= 0.99 * n as f64, "{ok}/{n}");
+}
+
+#[test]
+fn control_points_carry_a_loose_datum() {
+    // Datum almost free (0.1 rad, 1 m); eight control points at 5 mm fix the block.
+    let s = scene(61, 4, 200, 0.0);
+    let cfg = AdjustConfig {
+        window: 4,
+        max_points: 200,
+        max_observations: s.obs.len(),
+        sigmas: ConstraintSigmas {
+            datum_angle_rad: 0.1,
+            datum_position_m: 1.0,
+            ..ConstraintSigmas::default()
+        },
+        ..AdjustConfig::default()
+    };
+    let mut mem = arena_for(&cfg);
+    let mut arena = Arena::new(&mut mem);
+    let (mut w, ids) = load(&s, cfg, &mut arena, 62);
+    let mut rng = Rng(63);
+    for k in 0..8 {
+        let p = s.points[k * 20];
+        let c = [
+            p[0] + 0.005 * rng.normal(),
+            p[1] + 0.005 * rng.normal(),
+            p[2] + 0.005 * rng.normal(),
+        ];
+        w.set_point_prior(ids[k * 20], c, 0.005).unwrap();
+    }
+    assert_eq!(
+        w.set_point_prior(9999, [0.0; 3], 1.0),
+        Err(AdjustError::Unknown)
+    );
+    let r = w.solve().unwrap();
+    assert_eq!(r.constraints, 6 + 8 * 3);
+    assert!(r.chi2.passed, "{r:?}");
+    let (ok, n) = within(&w, &s, &ids, 3.0);
+    assert!(ok as f64 >= 0.99 * n as f64, "{ok}/{n}");
+    // The first epoch is now determined by the control (cm level), not by its 1 m prior.
+    assert!(w.epoch_std(0).unwrap()[3] < 0.05);
+}
+
+#[test]
+fn absurd_configurations_give_a_budget_and_an_error_not_a_panic() {
+    for cfg in [
+        AdjustConfig {
+            window: usize::MAX,
+            max_points: usize::MAX,
+            max_observations: usize::MAX,
+            ..AdjustConfig::default()
+        },
+        AdjustConfig {
+            window: 5000,
+            ..AdjustConfig::default()
+        },
+        AdjustConfig {
+            max_points: 0,
+            ..AdjustConfig::default()
+        },
+    ] {
+        let mut b = MemoryBudget::new();
+        cfg.budget(&mut b);
+        assert!(b.total() > 0);
+        let mut mem = [0u8; 256];
+        let mut arena = Arena::new(&mut mem);
+        let rig = Rig::rectified(Interior::pinhole_px(100, 100, 100.0), 0.5);
+        assert!(Window::new(cfg, &rig, &mut arena).is_err());
+    }
+}

@@ -23,7 +23,7 @@
 
 use super::cholesky;
 use super::constraints::{base_length, distance, prior_residual, smoothness};
-use super::geometry::{project_rig, Camera, RigParams};
+use super::geometry::{project_rig, project_with, project_xy, Camera, RigParams, Rotations};
 use super::quality::ChiSquareTest;
 use super::weighting::{cauchy_factor, median, CHI2_2_MEDIAN, SEED_REWEIGHT};
 use crate::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget, OutOfMemory};
@@ -71,7 +71,8 @@ pub enum Robust {
     /// `T = v^T Q_vv^-1 v` against `critical` (chi-square, 2 dof) until stable.
     Snooping { critical: f64 },
     /// Seed 000: after one adjustment, observations whose x residual exceeds
-    /// `threshold_mm` (the pixel size) get weight 1e-5 and the adjustment reruns once.
+    /// `threshold_mm` (the pixel size) get weight 1e-5 (both coordinates; the
+    /// new weight stays in the window) and the adjustment reruns once.
     SeedReweight { threshold_mm: f64 },
 }
 
@@ -234,6 +235,8 @@ struct EpochSlot {
     odometer: f64,
     odometer_sigma: f64,
     time: f64,
+    /// Cached rotation and derivatives of `params` (see [`Rotations`]).
+    rot: [f64; 36],
     id: u32,
     flags: u32,
 }
@@ -316,6 +319,7 @@ pub struct Window<'a> {
     nominal_base: f64,
     focal: [f64; 2],
     rig_std: [f64; 6],
+    rig_rot: Rotations,
     origin: [f64; 3],
     epochs: &'a mut [EpochSlot],
     n_epochs: usize,
@@ -344,49 +348,55 @@ impl AdjustConfig {
         6 * (self.window + 1)
     }
 
-    /// Adds the adjustment's buffers ("adjust." prefix) to `budget`.
+    /// Adds the adjustment's buffers ("adjust." prefix) to `budget`. Sizes
+    /// saturate instead of overflowing, so an absurd configuration gives an
+    /// absurd budget (and `Window::new` refuses it), never a panic.
     pub fn budget(&self, budget: &mut MemoryBudget) {
-        let nc = self.cam_capacity();
+        let nc = 6usize.saturating_mul(self.window.saturating_add(1));
         let (p, o, w) = (self.max_points, self.max_observations, self.window);
+        let p1 = p.saturating_add(1);
+        let w1 = w.saturating_add(1);
         budget.add(
             "adjust.epochs",
             ComponentKind::Storage,
-            slice_bytes::<EpochSlot>(w),
+            bytes::<EpochSlot>(w),
         );
         budget.add(
             "adjust.points",
             ComponentKind::Storage,
-            slice_bytes::<PointSlot>(p),
+            bytes::<PointSlot>(p),
         );
         budget.add(
             "adjust.observations",
             ComponentKind::Storage,
-            slice_bytes::<Observation>(o),
+            bytes::<Observation>(o),
         );
         budget.add(
             "adjust.point_index",
             ComponentKind::Working,
-            slice_bytes::<u32>(p + 1) + slice_bytes::<u32>(o),
+            bytes::<u32>(p1).saturating_add(bytes::<u32>(o)),
         );
         budget.add(
             "adjust.reduced_normal",
             ComponentKind::Working,
-            slice_bytes::<f64>(nc * nc),
+            bytes::<f64>(nc.saturating_mul(nc)),
         );
         budget.add(
             "adjust.vectors",
             ComponentKind::Working,
-            2 * slice_bytes::<f64>(nc) + slice_bytes::<f64>(3 * p),
+            bytes::<f64>(nc)
+                .saturating_mul(2)
+                .saturating_add(bytes::<f64>(p.saturating_mul(3))),
         );
         budget.add(
             "adjust.point_scratch",
             ComponentKind::Working,
-            slice_bytes::<BlockScratch>(w + 1) + slice_bytes::<u32>(w + 1),
+            bytes::<BlockScratch>(w1).saturating_add(bytes::<u32>(w1)),
         );
         budget.add(
             "adjust.residuals",
             ComponentKind::Working,
-            2 * slice_bytes::<f64>(o),
+            bytes::<f64>(o).saturating_mul(2),
         );
     }
 
@@ -408,6 +418,17 @@ impl AdjustConfig {
         } else {
             Err(AdjustError::InvalidConfig)
         }
+    }
+}
+
+/// [`slice_bytes`] that saturates (at a sixteenth of the address space, so a
+/// few saturated components still sum without overflow).
+fn bytes<T>(n: usize) -> usize {
+    let cap = usize::MAX / 16;
+    if n > cap / core::mem::size_of::<T>().max(1) {
+        cap
+    } else {
+        slice_bytes::<T>(n)
     }
 }
 
@@ -452,6 +473,7 @@ impl<'a> Window<'a> {
             nominal_base: rig.base_length(),
             focal: [rig.left.focal_mm, rig.right.focal_mm],
             rig_std: [0.0; 6],
+            rig_rot: Rotations::new(r.angles[0], r.angles[1], r.angles[2]),
             origin: [0.0; 3],
             epochs,
             n_epochs: 0,
@@ -891,6 +913,36 @@ impl<'a> Window<'a> {
         6 * (self.n_epochs + self.cfg.estimate_rig as usize)
     }
 
+    /// Projection through the cached rotations of epoch `slot` and the rig.
+    fn project(
+        &self,
+        slot: usize,
+        cam: Camera,
+        xyz: &[f64; 3],
+    ) -> Result<super::geometry::RigProjection, crate::camera::CameraError> {
+        let e = &self.epochs[slot];
+        let c = [e.params[3], e.params[4], e.params[5]];
+        let f = self.focal[cam as usize];
+        project_with(
+            &Rotations(e.rot),
+            &c,
+            &self.rig_rot,
+            &self.rig.base,
+            cam,
+            f,
+            xyz,
+        )
+    }
+
+    /// Recomputes the cached rotations after the parameters changed.
+    fn refresh_rotations(&mut self) {
+        for e in self.epochs[..self.n_epochs].iter_mut() {
+            e.rot = Rotations::new(e.params[0], e.params[1], e.params[2]).0;
+        }
+        let a = self.rig.angles;
+        self.rig_rot = Rotations::new(a[0], a[1], a[2]);
+    }
+
     /// Groups the observations by point (counting sort).
     fn build_index(&mut self) {
         let np = self.n_point_slots;
@@ -957,8 +1009,7 @@ impl<'a> Window<'a> {
             } else {
                 Camera::Right
             };
-            let pose = Pose::from_params(&self.epochs[slot].params);
-            let pr = match project_rig(&pose, &self.rig, cam, self.focal[o.camera as usize], &xyz) {
+            let pr = match self.project(slot, cam, &xyz) {
                 Ok(pr) => pr,
                 Err(_) => {
                     self.obs[oi].flags |= Observation::BEHIND;
@@ -1081,6 +1132,7 @@ impl<'a> Window<'a> {
     /// The reduced camera system `S dc = rhs` (lower triangle, undamped
     /// camera diagonal, points damped by `lambda`) into `reduced` and `rhs`.
     fn build(&mut self, lambda: f64) {
+        self.refresh_rotations();
         let nc = self.n_cam();
         let rig_block = self.rig_block();
         self.reduced[..nc * nc].fill(0.0);
@@ -1179,6 +1231,7 @@ impl<'a> Window<'a> {
     /// Decides which points take part (two rays or more, not at infinity)
     /// before an iteration sequence, so costs compare like with like.
     fn classify_points(&mut self) {
+        self.refresh_rotations();
         for p in 0..self.n_point_slots {
             if self.points[p].flags & PT_USED == 0 {
                 continue;
@@ -1333,15 +1386,55 @@ impl<'a> Window<'a> {
 
     /// `vTPv` at the current state, constraints included.
     fn cost(&mut self) -> (f64, usize) {
+        self.refresh_rotations();
         let mut cost = 0.0;
         let mut behind = 0;
-        for p in 0..self.n_point_slots {
-            if self.points[p].flags & (PT_USED | PT_EXCLUDED) != PT_USED {
+        // Observation by observation, projections without Jacobians.
+        for i in 0..self.n_obs {
+            let o = self.obs[i];
+            let pt = &self.points[o.point as usize];
+            if !(o.factor > 0.0) || pt.flags & (PT_USED | PT_EXCLUDED) != PT_USED {
                 continue;
             }
-            let (_, c, bh) = self.point_blocks(p, false);
-            cost += c;
-            behind += bh;
+            let Some(slot) = self.slot_of(o.epoch) else {
+                continue;
+            };
+            let e = &self.epochs[slot];
+            let cam = if o.camera == 0 {
+                Camera::Left
+            } else {
+                Camera::Right
+            };
+            let c = [e.params[3], e.params[4], e.params[5]];
+            let f = self.focal[o.camera as usize];
+            match project_xy(
+                &Rotations(e.rot),
+                &c,
+                &self.rig_rot,
+                &self.rig.base,
+                cam,
+                f,
+                &pt.xyz,
+            ) {
+                Some(xy) => {
+                    let r = [o.xy[0] - xy[0], o.xy[1] - xy[1]];
+                    cost += o.factor * (o.weight[0] * r[0] * r[0] + o.weight[1] * r[1] * r[1]);
+                    self.obs[i].flags &= !Observation::BEHIND;
+                }
+                None => {
+                    self.obs[i].flags |= Observation::BEHIND;
+                    behind += 1;
+                }
+            }
+        }
+        for pt in &self.points[..self.n_point_slots] {
+            if pt.flags & (PT_USED | PT_EXCLUDED | PT_PRIOR) == PT_USED | PT_PRIOR {
+                let wp = 1.0 / (pt.prior_sigma * pt.prior_sigma);
+                for a in 0..3 {
+                    let r = pt.prior[a] - pt.xyz[a];
+                    cost += wp * r * r;
+                }
+            }
         }
         (cost + self.add_constraints(false).0, behind)
     }
@@ -1468,6 +1561,23 @@ impl<'a> Window<'a> {
                 report.robust_rounds = 1;
             }
             Robust::Snooping { critical } => {
+                let (it, conv) = self.least_squares(max_it)?;
+                report.iterations += it;
+                report.converged = conv;
+                if !self.detection_passes()? {
+                    self.identify(critical, &mut report)?;
+                }
+            }
+        }
+        self.quality(&mut report)?;
+        Ok(report)
+    }
+
+    /// Identification: Cauchy re-weighting, then data snooping until stable.
+    fn identify(&mut self, critical: f64, report: &mut Report) -> Result<(), AdjustError> {
+        let max_it = self.cfg.max_iterations;
+        {
+            {
                 // Cauchy re-weighting on a median scale: blunders lose their pull.
                 for _ in 0..self.cfg.max_robust_rounds {
                     let (it, _) = self.least_squares(max_it.min(10))?;
@@ -1502,8 +1612,7 @@ impl<'a> Window<'a> {
                 }
             }
         }
-        self.quality(&mut report)?;
-        Ok(report)
+        Ok(())
     }
 
     /// Standardised 2-D residual `sqrt(v^T P v)` of every observation into `residuals`.
@@ -1541,7 +1650,43 @@ impl<'a> Window<'a> {
     /// on the median scale; excludes those beyond `critical`. Returns whether
     /// the excluded set changed.
     fn snoop(&mut self, critical: f64, round: usize) -> bool {
-        // Statistic per observation into residuals[].
+        self.statistics();
+        let n = self.n_obs;
+        let mut m = 0;
+        for i in 0..n {
+            if self.obs[i].factor > 0.0 && self.residuals[i].is_finite() {
+                self.work[m] = self.residuals[i];
+                m += 1;
+            }
+        }
+        // Median scale: 1 when the weights match the noise, and right also
+        // with the seed's weights whose scale is arbitrary.
+        let scale2 = (median(&mut self.work[..m]) / CHI2_2_MEDIAN).max(1e-30);
+        self.apply_flags(critical, round, scale2)
+    }
+
+    /// Detection (Baarda's DIA order): after plain least squares, the data are
+    /// accepted without any exclusion when the global test passes and the
+    /// largest `T` stays below the Bonferroni bound `-2 ln(0.05 / n)` (5 % for
+    /// the whole set); otherwise the robust identification runs.
+    fn detection_passes(&mut self) -> Result<bool, AdjustError> {
+        let mut r = Report::default();
+        self.quality(&mut r)?;
+        if !r.chi2.passed {
+            return Ok(false);
+        }
+        self.statistics();
+        let n = self.n_obs.max(1) as f64;
+        let bound = -2.0 * libm::log(0.05 / n);
+        let worst = self.residuals[..self.n_obs]
+            .iter()
+            .fold(0.0f64, |m, t| m.max(*t));
+        Ok(worst <= bound)
+    }
+
+    /// `T` of every observation into `residuals` (a-priori scale).
+    fn statistics(&mut self) {
+        self.refresh_rotations();
         for p in 0..self.n_point_slots {
             if self.points[p].flags & PT_USED == 0 {
                 continue;
@@ -1572,17 +1717,12 @@ impl<'a> Window<'a> {
                 self.residuals[oi] = self.statistic(oi, vinv.as_ref(), all);
             }
         }
+    }
+
+    /// Excludes/readmits observations from their `T` on the scale `scale2`;
+    /// returns whether the excluded set changed.
+    fn apply_flags(&mut self, critical: f64, round: usize, scale2: f64) -> bool {
         let n = self.n_obs;
-        let mut m = 0;
-        for i in 0..n {
-            if self.obs[i].factor > 0.0 && self.residuals[i].is_finite() {
-                self.work[m] = self.residuals[i];
-                m += 1;
-            }
-        }
-        // Median scale: 1 when the weights match the noise, and right also
-        // with the seed's weights whose scale is arbitrary.
-        let scale2 = (median(&mut self.work[..m]) / CHI2_2_MEDIAN).max(1e-30);
         let mut changed = false;
         for i in 0..n {
             let t = self.residuals[i] / scale2;
@@ -1620,9 +1760,8 @@ impl<'a> Window<'a> {
         } else {
             Camera::Right
         };
-        let pose = Pose::from_params(&self.epochs[slot].params);
         let xyz = self.points[o.point as usize].xyz;
-        let Ok(pr) = project_rig(&pose, &self.rig, cam, self.focal[o.camera as usize], &xyz) else {
+        let Ok(pr) = self.project(slot, cam, &xyz) else {
             return f64::INFINITY;
         };
         let r = [o.xy[0] - pr.xy[0], o.xy[1] - pr.xy[1]];
@@ -1872,5 +2011,84 @@ mod tests {
                 rhs[i]
             );
         }
+    }
+
+    /// One Gauss-Newton step through the Schur complement (rig estimated,
+    /// constraints on) leaves a gradient of `vTPv` (by central differences over
+    /// every camera, rig and point parameter) orders of magnitude smaller: the
+    /// Jacobians, the elimination and the back-substitution agree.
+    #[test]
+    fn schur_step_zeroes_the_numerical_gradient() {
+        use crate::adjust::tests::{load, scene};
+        let s = scene(71, 3, 12, 0.0);
+        let cfg = AdjustConfig {
+            window: 3,
+            max_points: 12,
+            max_observations: s.obs.len(),
+            estimate_rig: true,
+            robust: Robust::None,
+            sigmas: ConstraintSigmas {
+                datum_angle_rad: 1e-3,
+                datum_position_m: 1e-3,
+                base_length_m: 0.01,
+                velocity_change_mps: 1.0,
+                ..ConstraintSigmas::default()
+            },
+            ..AdjustConfig::default()
+        };
+        let mut b = MemoryBudget::new();
+        cfg.budget(&mut b);
+        let mut mem = vec![0u8; b.total()];
+        let mut arena = Arena::new(&mut mem);
+        let (mut w, _) = load(&s, cfg, &mut arena, 72);
+        w.set_gnss(2, s.poses[2].centre, 0.05).unwrap();
+        w.build_index();
+        w.classify_points();
+        // Start close to the optimum so one step is (nearly) the whole way.
+        for _ in 0..3 {
+            w.step(0.0).unwrap();
+        }
+        for e in 1..3 {
+            w.epochs[e].params[0] += 2e-4;
+            w.epochs[e].params[4] += 3e-3;
+        }
+        let mut r = w.rig.to_array();
+        r[1] += 1e-4;
+        r[3] += 2e-3;
+        w.rig = RigParams::from_array(&r);
+        for p in 0..w.n_point_slots {
+            w.points[p].xyz[1] += 5e-3;
+        }
+        let grad_norm = |w: &mut Window| -> f64 {
+            let mut sum = 0.0;
+            let h = 1e-7;
+            let n_cam = w.n_cam();
+            for i in 0..n_cam + 3 * w.n_point_slots {
+                let bump = |w: &mut Window, d: f64| {
+                    if i < 6 * w.n_epochs {
+                        w.epochs[i / 6].params[i % 6] += d;
+                    } else if i < n_cam {
+                        let mut r = w.rig.to_array();
+                        r[i - 6 * w.n_epochs] += d;
+                        w.rig = RigParams::from_array(&r);
+                    } else {
+                        let k = i - n_cam;
+                        w.points[k / 3].xyz[k % 3] += d;
+                    }
+                };
+                bump(w, h);
+                let cp = w.cost().0;
+                bump(w, -2.0 * h);
+                let cm = w.cost().0;
+                bump(w, h);
+                let g = (cp - cm) / (2.0 * h);
+                sum += g * g;
+            }
+            libm::sqrt(sum)
+        };
+        let before = grad_norm(&mut w);
+        w.step(0.0).unwrap();
+        let after = grad_norm(&mut w);
+        assert!(after < 1e-3 * before, "gradient {before} -> {after}");
     }
 }

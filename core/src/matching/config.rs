@@ -48,6 +48,10 @@ pub struct RefineConfig {
     /// Search along the row only and put the right point on the left point's row
     /// (rectified pairs, where the row is known exactly).
     pub rows_only: bool,
+    /// Left-right check: the right template, correlated back into the left image, must
+    /// land within this many pixels of the left point (0 disables the check). Rejects
+    /// matches whose templates straddle an occlusion edge.
+    pub back_check_px: f32,
 }
 
 impl Default for RefineConfig {
@@ -57,6 +61,7 @@ impl Default for RefineConfig {
             search_radius: 2,
             min_ncc: 0.8,
             rows_only: true,
+            back_check_px: 0.5,
         }
     }
 }
@@ -96,6 +101,8 @@ pub struct MatchConfig {
     pub track_history: usize,
     /// Optional sub-pixel refinement of stereo matches (needs the images).
     pub refine: Option<RefineConfig>,
+    /// Rigid-motion consistency of the quads (needs the rig at each epoch).
+    pub motion_check: Option<super::motion::MotionCheckConfig>,
 }
 
 impl MatchConfig {
@@ -123,6 +130,7 @@ impl MatchConfig {
             max_tracks: max_keypoints,
             track_history: 8,
             refine: None,
+            motion_check: Some(super::motion::MotionCheckConfig::default()),
         }
     }
 
@@ -166,6 +174,7 @@ impl MatchConfig {
                     && (r.search_radius as usize) <= MAX_REFINE_RADIUS
                     && r.search_radius > 0
                     && r.min_ncc.is_finite()
+                    && r.back_check_px.is_finite()
             }
         };
         if !finite || !geometry_ok || !refine_ok || self.ratio > 1.0 {
@@ -202,6 +211,13 @@ impl MatchConfig {
         budget.add("match.corrected", w, slice_bytes::<[f32; 2]>(n));
         budget.add("match.temporal", w, 4 * slice_bytes::<u32>(n));
         budget.add("match.predictions", w, 2 * slice_bytes::<[f32; 2]>(n));
+        budget.add(
+            "match.motion",
+            w,
+            slice_bytes::<super::motion::QuadObs>(n)
+                + slice_bytes::<[f64; 3]>(2 * n)
+                + slice_bytes::<u8>(n),
+        );
         budget.add(
             "match.quads",
             w,

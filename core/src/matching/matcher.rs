@@ -9,9 +9,10 @@
 
 use super::config::{carve, MatchConfig, MatchError, StereoGeometry, NONE};
 use super::grid::Grid;
+use super::motion::{check_motion, QuadObs};
 use super::predict::predict_positions;
 use super::quad::{close_loops, LoopDistances, Quad, QuadStats};
-use super::refine::{refine_match, RefineError};
+use super::refine::{refine_checked, RefineError};
 use super::search::{match_pass, Best, Features, PairStats, PassParams};
 use super::spread::spread;
 use super::stereo::{RectifiedBand, RigBand};
@@ -167,6 +168,9 @@ pub struct Matcher<'a> {
     pred_right: &'a mut [[f32; 2]],
     quads: &'a mut [Quad],
     ranks: &'a mut [u32],
+    quad_obs: &'a mut [QuadObs],
+    quad_pts: &'a mut [[f64; 3]],
+    quad_inlier: &'a mut [u8],
     prev: StereoSide<'a>,
     cur: StereoSide<'a>,
     tracks: Tracks<'a>,
@@ -195,6 +199,9 @@ impl<'a> Matcher<'a> {
             right_temporal_dist: carve(arena, n)?,
             pred_left: carve(arena, n)?,
             pred_right: carve(arena, n)?,
+            quad_obs: carve(arena, n)?,
+            quad_pts: carve(arena, 2 * n)?,
+            quad_inlier: carve(arena, n)?,
             quads: carve(arena, n)?,
             ranks: carve(arena, n)?,
             prev: StereoSide::new(arena, n)?,
@@ -313,7 +320,7 @@ impl<'a> Matcher<'a> {
             let (Some(rc), Some((li, ri))) = (self.cfg.refine, images) else {
                 continue;
             };
-            match refine_match(&li, &ri, [kl.x, kl.y], [kr.x, kr.y], &rc) {
+            match refine_checked(&li, &ri, [kl.x, kl.y], [kr.x, kr.y], &rc) {
                 Ok((p, _)) => {
                     cur.right_px[i] = p;
                     stats.refined += 1;
@@ -429,6 +436,22 @@ impl<'a> Matcher<'a> {
         images: Option<(ImageView<'_>, ImageView<'_>)>,
         motion: Option<(&Rig, &Pose)>,
     ) -> Result<EpochReport, MatchError> {
+        let rig = motion.map(|(r, _)| r);
+        self.process_epoch_with(cur, prev, images, rig, motion.map(|(_, p)| p))
+    }
+
+    /// [`Matcher::process_epoch`] with the rig given on its own: with a rig and no
+    /// motion the temporal search falls back to wide windows, but the rigid-motion
+    /// check of the quads ([`MatchConfig::motion_check`]) still runs.
+    pub fn process_epoch_with(
+        &mut self,
+        cur: StereoFeatures<'_>,
+        prev: Option<StereoFeatures<'_>>,
+        images: Option<(ImageView<'_>, ImageView<'_>)>,
+        rig: Option<&Rig>,
+        motion: Option<&Pose>,
+    ) -> Result<EpochReport, MatchError> {
+        let motion = rig.zip(motion);
         for f in [
             Some(cur.left),
             Some(cur.right),
@@ -481,7 +504,7 @@ impl<'a> Matcher<'a> {
             report.status = EpochStatus::RepeatedFrame;
             return Ok(report);
         }
-        self.close_quads(prev, cur, &mut report);
+        self.close_quads(prev, cur, rig, &mut report);
         report.status = match self.stereo_status(&cur) {
             Some(s) => s,
             None if (report.tie_points as usize) < self.cfg.min_temporal_matches => {
@@ -527,6 +550,7 @@ impl<'a> Matcher<'a> {
         &mut self,
         prev: StereoFeatures<'_>,
         cur: StereoFeatures<'_>,
+        rig: Option<&Rig>,
         report: &mut EpochReport,
     ) {
         let n = self.cfg.max_keypoints;
@@ -546,6 +570,10 @@ impl<'a> Matcher<'a> {
             self.quads,
             &mut report.quads,
         );
+        let nq = match (rig, self.cfg.motion_check) {
+            (Some(rig), Some(mc)) => self.motion_filter(prev, cur, rig, &mc, nq, &mut report.quads),
+            _ => nq,
+        };
         for q in self.quads[..nq].iter_mut() {
             q.track = self.prev.track[q.prev_left as usize];
             q.age = self
@@ -595,6 +623,51 @@ impl<'a> Matcher<'a> {
         }
         self.n_tie = k;
         report.tie_points = k as u32;
+    }
+
+    /// Removes the quads inconsistent with one rigid motion; returns the count kept.
+    fn motion_filter(
+        &mut self,
+        prev: StereoFeatures<'_>,
+        cur: StereoFeatures<'_>,
+        rig: &Rig,
+        mc: &super::motion::MotionCheckConfig,
+        nq: usize,
+        stats: &mut QuadStats,
+    ) -> usize {
+        let (pl, cl) = (prev.left.keypoints, cur.left.keypoints);
+        for (o, q) in self.quad_obs.iter_mut().zip(self.quads[..nq].iter()) {
+            let (i, a) = (q.prev_left as usize, q.cur_left as usize);
+            *o = [
+                [pl[i].x, pl[i].y],
+                self.prev.right_px[i],
+                [cl[a].x, cl[a].y],
+                self.cur.right_px[a],
+            ];
+        }
+        super::motion::to_corrected(rig, &mut self.quad_obs[..nq]);
+        let seed = self.epoch;
+        if check_motion(
+            rig,
+            mc,
+            &self.quad_obs[..nq],
+            self.quad_pts,
+            self.quad_inlier,
+            seed,
+        )
+        .is_none()
+        {
+            return nq;
+        }
+        let mut k = 0;
+        for i in 0..nq {
+            if self.quad_inlier[i] != 0 {
+                self.quads[k] = self.quads[i];
+                k += 1;
+            }
+        }
+        stats.motion_outliers = (nq - k) as u32;
+        k
     }
 
     fn accept_epoch(&mut self) {

@@ -10,6 +10,7 @@ pub mod config;
 pub mod distance;
 pub mod grid;
 pub mod matcher;
+pub mod motion;
 pub mod predict;
 pub mod quad;
 pub mod refine;

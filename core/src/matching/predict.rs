@@ -7,7 +7,7 @@
 //! camera's pose in that frame; [`relative_motion`] builds it from two object-frame poses.
 
 use super::config::NONE;
-use crate::camera::{project_to_pixel, Pose, Rig};
+use crate::camera::{Interior, Pose, Rig, MIN_DEPTH};
 use crate::features::Keypoint;
 use nalgebra::{Matrix3, Vector3};
 
@@ -22,10 +22,19 @@ pub fn relative_motion(prev: &Pose, cur: &Pose) -> Pose {
 /// Midpoint triangulation of a stereo match in the left camera frame (metres);
 /// `None` when the rays are parallel or the point is not in front of both cameras.
 pub fn triangulate(rig: &Rig, left_px: [f64; 2], right_px: [f64; 2]) -> Option<Vector3<f64>> {
+    triangulate_with(rig, &rig.relative_rotation(), left_px, right_px)
+}
+
+/// [`triangulate`] with the relative rotation computed once by the caller.
+fn triangulate_with(
+    rig: &Rig,
+    mrel: &Matrix3<f64>,
+    left_px: [f64; 2],
+    right_px: [f64; 2],
+) -> Option<Vector3<f64>> {
     let [xl, yl] = rig.left.pixel_to_corrected(left_px[0], left_px[1]);
     let [xr, yr] = rig.right.pixel_to_corrected(right_px[0], right_px[1]);
     let dl = Vector3::new(xl, yl, -rig.left.focal_mm);
-    let mrel: Matrix3<f64> = rig.relative_rotation();
     let dr = mrel.transpose() * Vector3::new(xr, yr, -rig.right.focal_mm);
     let b = Vector3::from(rig.base_m);
     // Closest points of 0 + s dl and b + u dr.
@@ -59,7 +68,10 @@ pub fn predict_positions(
 ) -> usize {
     out_left.fill([f32::NAN; 2]);
     out_right.fill([f32::NAN; 2]);
-    let right_motion = rig.right_pose(motion);
+    // Rotations once per call: the per-point work is then a few multiply-adds.
+    let mrel = rig.relative_rotation();
+    let left_cam = Projector::new(motion, &rig.left);
+    let right_cam = Projector::new(&rig.right_pose(motion), &rig.right);
     let mut count = 0;
     for (i, (&j, kl)) in stereo.iter().zip(prev_left).enumerate() {
         if j == NONE || i >= out_left.len() {
@@ -68,15 +80,15 @@ pub fn predict_positions(
         let (Some(kr), true) = (prev_right.get(j as usize), (j as usize) < out_right.len()) else {
             continue;
         };
-        let Some(p) = triangulate(rig, [kl.x as f64, kl.y as f64], [kr.x as f64, kr.y as f64])
-        else {
+        let Some(p) = triangulate_with(
+            rig,
+            &mrel,
+            [kl.x as f64, kl.y as f64],
+            [kr.x as f64, kr.y as f64],
+        ) else {
             continue;
         };
-        let p = [p[0], p[1], p[2]];
-        let (Ok(l), Ok(r)) = (
-            project_to_pixel(motion, &rig.left, &p),
-            project_to_pixel(&right_motion, &rig.right, &p),
-        ) else {
+        let (Some(l), Some(r)) = (left_cam.pixel(&p), right_cam.pixel(&p)) else {
             continue;
         };
         out_left[i] = [l[0] as f32, l[1] as f32];
@@ -84,4 +96,32 @@ pub fn predict_positions(
         count += 1;
     }
     count
+}
+
+/// Collinearity with the rotation computed once (same result as `project_to_pixel`).
+struct Projector<'c> {
+    m: Matrix3<f64>,
+    c: Vector3<f64>,
+    cam: &'c Interior,
+}
+
+impl<'c> Projector<'c> {
+    fn new(pose: &Pose, cam: &'c Interior) -> Self {
+        Projector {
+            m: pose.rotation(),
+            c: pose.centre_vec(),
+            cam,
+        }
+    }
+
+    fn pixel(&self, p: &Vector3<f64>) -> Option<[f64; 2]> {
+        let uvw = self.m * (p - self.c);
+        if uvw[2].is_nan() || uvw[2] >= -MIN_DEPTH {
+            return None;
+        }
+        let f = self.cam.focal_mm;
+        self.cam
+            .corrected_to_pixel(-f * uvw[0] / uvw[2], -f * uvw[1] / uvw[2])
+            .ok()
+    }
 }

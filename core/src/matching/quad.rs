@@ -39,6 +39,8 @@ pub struct QuadStats {
     pub closed: u32,
     /// Closed quads that did not fit the quad buffer.
     pub overflow: u32,
+    /// Closed quads inconsistent with the epoch's rigid motion (removed).
+    pub motion_outliers: u32,
 }
 
 /// Distances of the matches that make up a quad (for the cost).

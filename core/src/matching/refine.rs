@@ -19,6 +19,37 @@ pub enum RefineError {
     /// The peak lies on the edge of the search area: the descriptor match and the area
     /// match disagree by more than the search radius.
     PeakOnEdge,
+    /// Correlating back from the right image does not return to the left point.
+    BackCheck,
+}
+
+/// [`refine_match`], then the left-right check of [`RefineConfig::back_check_px`].
+pub fn refine_checked(
+    left_img: &ImageView<'_>,
+    right_img: &ImageView<'_>,
+    left: [f32; 2],
+    right: [f32; 2],
+    cfg: &RefineConfig,
+) -> Result<([f32; 2], f32), RefineError> {
+    let (p, score) = refine_match(left_img, right_img, left, right, cfg)?;
+    if cfg.back_check_px > 0.0 {
+        let back_cfg = RefineConfig {
+            min_ncc: f32::MIN,
+            ..*cfg
+        };
+        let (q, _) = refine_match(right_img, left_img, p, left, &back_cfg).map_err(|e| {
+            if e == RefineError::Border {
+                e
+            } else {
+                RefineError::BackCheck
+            }
+        })?;
+        if (q[0] - left[0]).abs() > cfg.back_check_px || (q[1] - left[1]).abs() > cfg.back_check_px
+        {
+            return Err(RefineError::BackCheck);
+        }
+    }
+    Ok((p, score))
 }
 
 const T: usize = 2 * MAX_REFINE_HALF + 1;

@@ -434,10 +434,8 @@ fn tracks_capacity_keeps_spread_and_counts_dropped() {
     let first = reports[0];
     assert_eq!(first.tracks.started, 60);
     assert_eq!(first.tie_points, 60);
-    assert_eq!(
-        first.tracks.dropped as usize,
-        first.quads.closed as usize - 60
-    );
+    let kept = first.quads.closed - first.quads.motion_outliers;
+    assert_eq!(first.tracks.dropped, kept - 60);
     assert!(reports.iter().all(|r| r.tracks.live <= 60));
     // Later epochs continue the old tracks first.
     assert!(reports[1].tracks.continued > 40, "{:?}", reports[1].tracks);
@@ -470,7 +468,10 @@ fn spreading_covers_every_region() {
         )
         .unwrap();
     assert_eq!(rep.tie_points, 48);
-    assert_eq!(rep.spread_dropped, rep.quads.closed - 48);
+    assert_eq!(
+        rep.spread_dropped,
+        rep.quads.closed - rep.quads.motion_outliers - 48
+    );
     let mut per_region = [0u32; 12];
     for t in m.tie_points() {
         per_region[spread::region_of(t.cur.left[0], t.cur.left[1], 640, 480, 4, 3) as usize] += 1;
@@ -697,4 +698,59 @@ fn ncc_refinement_recovers_subpixel_disparity() {
         refine_match(&li, &ri, [f32::NAN, 30.0], [45.0, 30.0], &cfg),
         Err(refine::RefineError::Border)
     );
+}
+
+#[test]
+fn motion_check_removes_consistent_wrong_loops() {
+    // Quads that close their loop but were matched to a neighbour in both current images
+    // (a repeated window) are found by the rigid-motion check; the true ones all stay.
+    let rig = rectified_rig();
+    let prev = pose_at(0.0);
+    let cur = Pose::from_degrees(90.3, 0.1, -0.2, [0.05, 0.9, 0.01]);
+    let scene = SyntheticScene::street(51);
+    let mut obs = Vec::new();
+    for id in 0..400 {
+        let p = scene.point(id);
+        let px = |pose: &Pose, cam: &Interior| project_to_pixel(pose, cam, &p).ok();
+        let v = [
+            px(&prev, &rig.left),
+            px(&rig.right_pose(&prev), &rig.right),
+            px(&cur, &rig.left),
+            px(&rig.right_pose(&cur), &rig.right),
+        ];
+        if let [Some(a), Some(b), Some(c), Some(d)] = v {
+            obs.push([a, b, c, d].map(|q| [q[0] as f32, q[1] as f32]));
+        }
+    }
+    let n = obs.len();
+    let mut wrong = 0;
+    for (i, o) in obs.iter_mut().enumerate() {
+        if i % 10 == 3 {
+            // Both current observations shifted together: the stereo loop still closes.
+            o[2][0] += 9.0;
+            o[3][0] += 9.0;
+            wrong += 1;
+        }
+    }
+    motion::to_corrected(&rig, &mut obs);
+    let mut pts = vec![[0.0f64; 3]; 2 * n];
+    let mut inlier = vec![0u8; n];
+    let cfg = motion::MotionCheckConfig::default();
+    let m = motion::check_motion(&rig, &cfg, &obs, &mut pts, &mut inlier, 1).expect("enough quads");
+    for (i, &f) in inlier.iter().enumerate() {
+        assert_eq!(f == 1, i % 10 != 3, "quad {i}");
+    }
+    assert_eq!(inlier.iter().filter(|&&f| f == 0).count(), wrong);
+    // The motion found is the true one (in the previous camera frame).
+    let truth = relative_motion(&prev, &cur);
+    let t_true = -(truth.rotation() * truth.centre_vec());
+    assert!((m.t - t_true).norm() < 0.05, "{} vs {}", m.t, t_true);
+    // Too few quads: no verdict, everything kept.
+    let mut few = vec![0u8; 5];
+    let cfg = motion::MotionCheckConfig {
+        min_quads: 8,
+        ..cfg
+    };
+    assert!(motion::check_motion(&rig, &cfg, &obs[..5], &mut pts, &mut few, 1).is_none());
+    assert!(few.iter().all(|&f| f == 1));
 }

@@ -59,6 +59,10 @@ pub struct SiftConfig {
     pub pending_capacity: usize,
     /// Secondary orientation peaks at least this fraction of the highest.
     pub peak_ratio: f32,
+    /// An extra octave at input resolution with half the blur (`sigma0 / 2`), run before
+    /// octave 0: the fine scales OpenCV reaches by doubling the image, at a quarter of the
+    /// cost of doubling. Requires `input_sigma < sigma0 / 2`.
+    pub fine_octave: bool,
 }
 
 impl Default for SiftConfig {
@@ -78,6 +82,7 @@ impl Default for SiftConfig {
             upright: false,
             pending_capacity: 2048,
             peak_ratio: 0.8,
+            fine_octave: false,
         }
     }
 }
@@ -120,6 +125,8 @@ impl From<crate::image::ImageError> for SiftError {
 pub struct Geometry {
     /// Gaussian levels per octave (`levels + 3`).
     pub n: usize,
+    /// Blur of level 0 in octave pixels.
+    pub sigma0: f32,
     /// Incremental blur of each level (level 0: from the octave source).
     pub sigma_inc: [f32; MAX_LEVELS],
     /// Kernel radius of each level.
@@ -187,7 +194,12 @@ impl SiftConfig {
         if !(self.peak_ratio.is_finite() && self.peak_ratio > 0.0 && self.peak_ratio <= 1.0) {
             return Err(SiftError::BadConfig("peak_ratio must be in (0, 1]"));
         }
-        let g = self.geometry_unchecked();
+        if self.fine_octave && self.input_sigma >= self.sigma0 * 0.5 {
+            return Err(SiftError::BadConfig(
+                "fine_octave needs input_sigma < sigma0 / 2",
+            ));
+        }
+        let g = self.geometry_unchecked(self.sigma0);
         if g.radius[..g.n].iter().any(|&r| r > MAX_RADIUS) {
             return Err(SiftError::BadConfig(
                 "sigma0/levels give a kernel wider than MAX_RADIUS",
@@ -196,26 +208,29 @@ impl SiftConfig {
         Ok(())
     }
 
-    /// Blur (octave pixels) of level `k` of an octave.
-    pub fn level_sigma(&self, k: f32) -> f32 {
-        self.sigma0 * libm::exp2f(k / self.levels as f32)
+    /// Blur (octave pixels) of level `k` of an octave whose level 0 has `sigma0`.
+    pub fn level_sigma(&self, sigma0: f32, k: f32) -> f32 {
+        sigma0 * libm::exp2f(k / self.levels as f32)
     }
 
-    /// Largest octave-relative scale a kept keypoint can have (refined layer < levels + 0.5).
-    pub fn max_keypoint_sigma(&self) -> f32 {
-        self.level_sigma(self.levels as f32 + 0.5)
-    }
-
-    /// Derived geometry. Call [`SiftConfig::validate`] first.
+    /// Geometry of the regular octaves (`sigma0`).
     pub fn geometry(&self) -> Result<Geometry, SiftError> {
         self.validate()?;
-        Ok(self.geometry_unchecked())
+        Ok(self.geometry_unchecked(self.sigma0))
     }
 
-    fn geometry_unchecked(&self) -> Geometry {
+    /// Geometry of the fine octave (`sigma0 / 2`, input resolution); it needs fewer rows
+    /// than [`SiftConfig::geometry`] everywhere, so it runs in the same buffers.
+    pub fn fine_geometry(&self) -> Result<Geometry, SiftError> {
+        self.validate()?;
+        Ok(self.geometry_unchecked(self.sigma0 * 0.5))
+    }
+
+    fn geometry_unchecked(&self, s0: f32) -> Geometry {
         let n = (self.levels + 3).min(MAX_LEVELS);
         let mut g = Geometry {
             n,
+            sigma0: s0,
             sigma_inc: [0.0; MAX_LEVELS],
             radius: [0; MAX_LEVELS],
             delay: [0; MAX_LEVELS],
@@ -230,11 +245,11 @@ impl SiftConfig {
         // Level 0 of octave 0 blurs the input from input_sigma to sigma0; octaves > 0 start from
         // level `levels` of the previous octave decimated, which already has sigma0 in its pixels,
         // so their level 0 is a copy (radius 0).
-        let s0 = self.sigma0;
+        g.sigma0 = s0;
         g.sigma_inc[0] = libm::sqrtf((s0 * s0 - self.input_sigma * self.input_sigma).max(0.0));
         for k in 1..n {
-            let a = self.level_sigma(k as f32 - 1.0);
-            let b = self.level_sigma(k as f32);
+            let a = self.level_sigma(s0, k as f32 - 1.0);
+            let b = self.level_sigma(s0, k as f32);
             g.sigma_inc[k] = libm::sqrtf(b * b - a * a);
         }
         for k in 0..n {
@@ -246,8 +261,10 @@ impl SiftConfig {
         }
         // Descriptor reach in octave pixels: half diagonal of the sampling window
         // ((bins + 1) / 2 bins of 3 sigma) plus refinement shift, gradient and rounding.
-        let reach = 3.0 * self.max_keypoint_sigma() * (DESC_BINS as f32 + 1.0) * 0.5 * 1.4143;
-        let ori_reach = 4.5 * self.max_keypoint_sigma();
+        // Largest octave-relative scale a kept keypoint can have (refined layer < levels + 0.5).
+        let max_sigma = self.level_sigma(s0, self.levels as f32 + 0.5);
+        let reach = 3.0 * max_sigma * (DESC_BINS as f32 + 1.0) * 0.5 * 1.4143;
+        let ori_reach = 4.5 * max_sigma;
         g.margin = libm::ceilf(reach.max(ori_reach)) as usize + 3;
         let last = n - 1;
         let mut row = 0;
@@ -351,8 +368,9 @@ pub fn kernel_radius(sigma: f32) -> usize {
 /// Kernel taps stored per level (centre and one side: the kernels are symmetric).
 pub const KERNEL_STRIDE: usize = MAX_RADIUS + 1;
 
+/// Kernels of the regular octaves, then of the fine octave.
 pub(crate) fn kernel_len(g: &Geometry) -> usize {
-    g.n * KERNEL_STRIDE
+    2 * g.n * KERNEL_STRIDE
 }
 
 /// Three rows of every DoG layer: rows r-1, r, r+1 around the detection row.

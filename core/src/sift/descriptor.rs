@@ -10,9 +10,12 @@
 use core::f32::consts::PI;
 
 use super::config::{DESC_BINS, DESC_GRID, DESC_ORI_BINS, DESC_SAMPLES_PER_BIN};
-use super::fastmath::atan2_pos;
+use super::fastmath::{atan2_pos, floor_i, round_i};
 use super::levels::Levels;
 use crate::features::Descriptor;
+
+/// Rows a descriptor window may span (larger windows lose their outer rows).
+const MAX_ROWS: usize = 192;
 
 /// Gaussian weights of the sampling grid (sigma = half the descriptor width, as Lowe).
 pub fn fill_weights(weights: &mut [f32]) {
@@ -55,24 +58,64 @@ pub fn describe(
     let (sin_t, cos_t) = (libm::sinf(theta), libm::cosf(theta));
     let (w, h) = (lv.w as isize, lv.h as isize);
     let obin_scale = N as f32 / (2.0 * PI);
+    // Row slices of the sampled window, looked up once (ring slots need a division).
+    let reach = hw * (D as f32 + 1.0) * 0.5 * 1.4143 + 2.0;
+    let r_lo = (floor_i(y - reach) as isize).max(0);
+    let r_hi = (floor_i(y + reach) as isize + 1).min(h - 1);
+    let mut rows: [&[i16]; MAX_ROWS] = [&[]; MAX_ROWS];
+    let n_rows = ((r_hi - r_lo + 1).max(0) as usize).min(MAX_ROWS);
+    for (i, row) in rows.iter_mut().enumerate().take(n_rows) {
+        *row = lv.row(k, r_lo + i as isize);
+    }
+    let row_at = |r: isize| -> &[i16] {
+        let i = r - r_lo;
+        if i < 0 || i as usize >= n_rows {
+            &[]
+        } else {
+            rows[i as usize]
+        }
+    };
+    let inv_hw = 1.0 / hw;
+    let half = D as f32 * 0.5 - 0.5;
+    let mut ucos = [0f32; DESC_GRID];
+    let mut usin = [0f32; DESC_GRID];
+    for j in 0..DESC_GRID {
+        let b = grid_bin(j);
+        let u = (b - D as f32 * 0.5 + 0.5) * hw;
+        ucos[j] = u * cos_t;
+        usin[j] = u * sin_t;
+    }
+    // Padded histogram: (D + 2) x (D + 2) positions x (N + 1) orientations, folded at the end.
+    const P: usize = DESC_BINS + 2;
+    const NO: usize = DESC_ORI_BINS + 1;
+    let mut padded = [0f32; P * P * NO];
     for i in 0..DESC_GRID {
-        let rbin = grid_bin(i);
-        let v = (rbin - D as f32 * 0.5 + 0.5) * hw;
+        // The grid is square: row i has v = u_i, so v sin = usin[i] and v cos = ucos[i].
+        let (vsin, vcos) = (usin[i], ucos[i]);
         for j in 0..DESC_GRID {
-            let cbin = grid_bin(j);
-            let u = (cbin - D as f32 * 0.5 + 0.5) * hw;
             // Keypoint frame (u along the orientation) to image offsets (y down).
-            let sx = x + u * cos_t - v * sin_t;
-            let sy = y + u * sin_t + v * cos_t;
-            let pc = libm::roundf(sx) as isize;
-            let pr = libm::roundf(sy) as isize;
+            let sx = x + ucos[j] - vsin;
+            let sy = y + usin[j] + vcos;
+            let pc = round_i(sx) as isize;
+            let pr = round_i(sy) as isize;
             if pc < 1 || pc >= w - 1 || pr < 1 || pr >= h - 1 {
                 continue;
             }
-            let row = lv.row(k, pr);
+            let (up, row, down) = (row_at(pr - 1), row_at(pr), row_at(pr + 1));
             let c = pc as usize;
+            if c + 1 >= row.len() || c >= up.len() || c >= down.len() {
+                continue;
+            }
+            // Bins from the exact position of the pixel sampled (not the ideal grid point), so
+            // rounding to the pixel grid does not blur the spatial binning under rotation.
+            let (ox, oy) = (pc as f32 - x, pr as f32 - y);
+            let cbin = (ox * cos_t + oy * sin_t) * inv_hw + half;
+            let rbin = (oy * cos_t - ox * sin_t) * inv_hw + half;
+            if cbin <= -1.0 || cbin >= D as f32 || rbin <= -1.0 || rbin >= D as f32 {
+                continue;
+            }
             let dx = (row[c + 1] as i32 - row[c - 1] as i32) as f32;
-            let dy = (lv.row(k, pr + 1)[c] as i32 - lv.row(k, pr - 1)[c] as i32) as f32;
+            let dy = (down[c] as i32 - up[c] as i32) as f32;
             let wgt = weights.get(i * DESC_GRID + j).copied().unwrap_or(0.0);
             let mag = libm::sqrtf(dx * dx + dy * dy) * wgt;
             if mag == 0.0 {
@@ -82,48 +125,37 @@ pub fn describe(
             if ori < 0.0 {
                 ori += 2.0 * PI;
             }
-            if ori >= 2.0 * PI {
-                ori -= 2.0 * PI;
+            let obin = ori * obin_scale;
+            let o0 = floor_i(obin).clamp(0, N as i32 - 1) as usize;
+            let fo = obin - o0 as f32;
+            let (rf, cf) = (floor_i(rbin), floor_i(cbin));
+            let (fr, fc) = (rbin - rf as f32, cbin - cf as f32);
+            // Padded indices: bin -1 is index 0.
+            let (r0, c0) = ((rf + 1).max(0) as usize, (cf + 1).max(0) as usize);
+            let m_r = [mag * (1.0 - fr), mag * fr];
+            let w_c = [1.0 - fc, fc];
+            for (dr, &mr) in m_r.iter().enumerate() {
+                for (dc, &wc) in w_c.iter().enumerate() {
+                    let m = mr * wc;
+                    let base = ((r0 + dr) * P + c0 + dc) * NO + o0;
+                    if let Some(cell) = padded.get_mut(base..base + 2) {
+                        cell[0] += m * (1.0 - fo);
+                        cell[1] += m * fo;
+                    }
+                }
             }
-            accumulate(&mut hist, rbin, cbin, ori * obin_scale, mag);
+        }
+    }
+    // Fold the wrapped orientation slot and drop the outer spatial ring.
+    for r in 0..D {
+        for c in 0..D {
+            let src = ((r + 1) * P + c + 1) * NO;
+            let dst = (r * D + c) * N;
+            hist[dst..dst + N].copy_from_slice(&padded[src..src + N]);
+            hist[dst] += padded[src + N];
         }
     }
     finish(&hist, out);
-}
-
-/// Trilinear distribution of one sample over the 2x2x2 nearest bins.
-#[inline]
-fn accumulate(
-    hist: &mut [f32; DESC_BINS * DESC_BINS * DESC_ORI_BINS],
-    rbin: f32,
-    cbin: f32,
-    obin: f32,
-    mag: f32,
-) {
-    const N: usize = DESC_ORI_BINS;
-    const D: isize = DESC_BINS as isize;
-    let r0 = libm::floorf(rbin);
-    let c0 = libm::floorf(cbin);
-    let o0 = libm::floorf(obin);
-    let (fr, fc, fo) = (rbin - r0, cbin - c0, obin - o0);
-    let (r0, c0) = (r0 as isize, c0 as isize);
-    let o0 = (o0 as isize).rem_euclid(N as isize) as usize;
-    for (dr, wr) in [(0isize, 1.0 - fr), (1, fr)] {
-        let rr = r0 + dr;
-        if !(0..D).contains(&rr) {
-            continue;
-        }
-        for (dc, wc) in [(0isize, 1.0 - fc), (1, fc)] {
-            let cc = c0 + dc;
-            if !(0..D).contains(&cc) {
-                continue;
-            }
-            let base = ((rr * D + cc) as usize) * N;
-            let m = mag * wr * wc;
-            hist[base + o0] += m * (1.0 - fo);
-            hist[base + (o0 + 1) % N] += m * fo;
-        }
-    }
 }
 
 /// Normalise, clip at 0.2, renormalise and quantise (512 scale, saturating, as OpenCV).
@@ -138,7 +170,7 @@ fn finish(hist: &[f32; 128], out: &mut Descriptor) {
     }
     let k = 512.0 / libm::sqrtf(n2).max(f32::EPSILON);
     for (o, &v) in out.iter_mut().zip(clipped.iter()) {
-        *o = libm::roundf(v * k).clamp(0.0, 255.0) as u8;
+        *o = round_i(v * k).clamp(0, 255) as u8;
     }
 }
 
@@ -159,15 +191,5 @@ mod tests {
         let mut z = [1u8; 128];
         finish(&[0.0; 128], &mut z);
         assert!(z.iter().all(|&v| v == 0));
-    }
-
-    #[test]
-    fn trilinear_weights_sum_to_magnitude_inside() {
-        let mut h = [0f32; 128];
-        accumulate(&mut h, 1.3, 2.6, 7.5, 2.0);
-        let s: f32 = h.iter().sum();
-        assert!((s - 2.0).abs() < 1e-5);
-        // Orientation wraps from bin 7 to bin 0.
-        assert!(h[(4 + 2) * 8] > 0.0);
     }
 }

@@ -3,6 +3,7 @@
 //! with contrast and edge rejection.
 
 use super::config::{BORDER, FRAC_BITS, REFINE_ROWS};
+use super::fastmath::round_i;
 use super::levels::Levels;
 use super::pending::Pending;
 
@@ -113,9 +114,9 @@ pub fn refine(lv: &Levels, p: &RefineParams, c: usize, r: usize, layer: usize) -
         if x.iter().any(|v| v.is_nan() || v.abs() >= 1.0e6) {
             return Refined::Unstable;
         }
-        c += libm::roundf(x[0]) as isize;
-        r += libm::roundf(x[1]) as isize;
-        k += libm::roundf(x[2]) as isize;
+        c += round_i(x[0]) as isize;
+        r += round_i(x[1]) as isize;
+        k += round_i(x[2]) as isize;
         if k < 1
             || k > p.levels as isize
             || c < BORDER as isize

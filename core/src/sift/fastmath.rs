@@ -58,3 +58,37 @@ mod tests {
         assert_eq!(atan2_pos(0.0, 0.0), 0.0);
     }
 }
+
+/// Floor to i32 without a libm call (inputs are far inside the i32 range; NaN gives 0).
+#[inline]
+pub fn floor_i(x: f32) -> i32 {
+    let i = x as i32;
+    if (i as f32) > x {
+        i - 1
+    } else {
+        i
+    }
+}
+
+/// Round half up to i32.
+#[inline]
+pub fn round_i(x: f32) -> i32 {
+    floor_i(x + 0.5)
+}
+
+#[cfg(test)]
+mod rounding_tests {
+    use super::*;
+
+    #[test]
+    fn floor_and_round_match_libm() {
+        for i in -400..400 {
+            let x = i as f32 * 0.173;
+            assert_eq!(floor_i(x), libm::floorf(x) as i32);
+            assert_eq!(round_i(x), libm::floorf(x + 0.5) as i32);
+        }
+        assert_eq!(floor_i(-0.5), -1);
+        assert_eq!(round_i(-0.5), 0);
+        assert_eq!(floor_i(f32::NAN), 0);
+    }
+}

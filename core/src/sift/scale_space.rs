@@ -7,7 +7,7 @@
 //! their own ring of `2 r + 1` rows and blur that ring vertically. Borders replicate
 //! the edge pixel, which keeps the vertical pass causal at the top of the image.
 
-use super::config::{KERNEL_BITS, KERNEL_STRIDE};
+use super::config::{KERNEL_BITS, KERNEL_STRIDE, MAX_RADIUS};
 
 /// Fills `taps[0..=radius]` (centre first, then one side) with a Q14 Gaussian whose
 /// full symmetric sum is exactly `1 << KERNEL_BITS`.
@@ -67,24 +67,101 @@ pub fn blur_row(
     mid.copy_from_slice(&input[..w]);
     right.fill(input[w - 1]);
     let pad = &*pad;
-    let acc = &mut acc[..w];
-    let k0 = taps[0];
-    for (a, &p) in acc.iter_mut().zip(&pad[radius..radius + w]) {
-        *a = k0 * p as i32;
+    let mut rows: [&[i16]; 2 * MAX_RADIUS + 1] = [&[]; 2 * MAX_RADIUS + 1];
+    for (j, row) in rows.iter_mut().enumerate().take(2 * radius + 1) {
+        *row = &pad[j..j + w];
     }
-    for (j, &kj) in taps.iter().enumerate().take(radius + 1).skip(1) {
-        let lo = &pad[radius - j..radius - j + w];
-        let hi = &pad[radius + j..radius + j + w];
-        for ((a, &l), &h) in acc.iter_mut().zip(lo).zip(hi) {
-            *a += kj * (l as i32 + h as i32);
+    convolve(&rows[..2 * radius + 1], taps, radius, acc, &mut out[..w]);
+}
+
+/// `out[c] = round(sum_j k_|j - radius| * rows[j][c])`: the symmetric kernel applied across
+/// `2 radius + 1` rows (shifted copies of one row for the horizontal pass, ring rows for
+/// the vertical pass). SSE2 on x86_64 (16-bit pairs multiplied into 32-bit sums, which is
+/// exact: taps <= 2^14 and samples <= 255 * 64), the same arithmetic in scalar elsewhere.
+pub fn convolve(rows: &[&[i16]], taps: &[i32], radius: usize, acc: &mut [i32], out: &mut [i16]) {
+    let w = out.len();
+    if rows.len() != 2 * radius + 1 || taps.len() <= radius || rows.iter().any(|r| r.len() < w) {
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
+    let done = simd::convolve_sse2(rows, taps, radius, out);
+    #[cfg(not(target_arch = "x86_64"))]
+    let done = 0;
+    let n = w.min(acc.len());
+    let acc = &mut acc[..n];
+    if done >= acc.len() {
+        return;
+    }
+    let k0 = taps[0] as i16 as i32;
+    for (c, a) in acc.iter_mut().enumerate().skip(done) {
+        *a = k0 * rows[radius][c] as i32;
+    }
+    for (j, &t) in taps.iter().enumerate().take(radius + 1).skip(1) {
+        let kj = t as i16 as i32;
+        let lo = rows[radius - j];
+        let hi = rows[radius + j];
+        for (c, a) in acc.iter_mut().enumerate().skip(done) {
+            *a += kj * (lo[c] as i32 + hi[c] as i32);
         }
     }
-    for (o, &a) in out[..w].iter_mut().zip(acc.iter()) {
+    for (o, &a) in out.iter_mut().zip(acc.iter()).skip(done) {
         *o = round_q14(a);
     }
 }
 
-/// Vertical pass: `rows[j]` is the row at offset `j - radius` (already clamped by the caller).
+#[cfg(target_arch = "x86_64")]
+mod simd {
+    use super::{KERNEL_BITS, MAX_RADIUS};
+    use core::arch::x86_64::*;
+
+    /// Columns `0..w - w % 8` of [`super::convolve`]; returns how many were written.
+    pub fn convolve_sse2(rows: &[&[i16]], taps: &[i32], radius: usize, out: &mut [i16]) -> usize {
+        let w = out.len();
+        let blocks = w / 8;
+        // SAFETY: every row holds at least `w` values (checked by the caller) and each
+        // load/store below touches columns `c..c + 8` with `c + 8 <= blocks * 8 <= w`.
+        // SSE2 is part of the x86_64 baseline.
+        unsafe {
+            let round = _mm_set1_epi32(1 << (KERNEL_BITS - 1));
+            let centre = rows[radius].as_ptr();
+            // (k0, 0) pairs: the centre row is interleaved with zeros.
+            let k0 = _mm_set1_epi32(taps[0] & 0xffff);
+            // Hoisted per-tap constants and row pointers: (kj, kj) pairs, left and right rows.
+            let mut kv = [_mm_setzero_si128(); MAX_RADIUS + 1];
+            let mut lp = [centre; MAX_RADIUS + 1];
+            let mut hp = [centre; MAX_RADIUS + 1];
+            for j in 1..=radius.min(MAX_RADIUS) {
+                let kj = taps[j] & 0xffff;
+                kv[j] = _mm_set1_epi32(kj | (kj << 16));
+                lp[j] = rows[radius - j].as_ptr();
+                hp[j] = rows[radius + j].as_ptr();
+            }
+            let zero = _mm_setzero_si128();
+            for b in 0..blocks {
+                let c = b * 8;
+                let x = _mm_loadu_si128(centre.add(c) as *const __m128i);
+                let mut a0 = _mm_madd_epi16(_mm_unpacklo_epi16(x, zero), k0);
+                let mut a1 = _mm_madd_epi16(_mm_unpackhi_epi16(x, zero), k0);
+                for j in 1..=radius.min(MAX_RADIUS) {
+                    let k = kv[j];
+                    let l = _mm_loadu_si128(lp[j].add(c) as *const __m128i);
+                    let h = _mm_loadu_si128(hp[j].add(c) as *const __m128i);
+                    a0 = _mm_add_epi32(a0, _mm_madd_epi16(_mm_unpacklo_epi16(l, h), k));
+                    a1 = _mm_add_epi32(a1, _mm_madd_epi16(_mm_unpackhi_epi16(l, h), k));
+                }
+                a0 = _mm_srai_epi32(_mm_add_epi32(a0, round), KERNEL_BITS as i32);
+                a1 = _mm_srai_epi32(_mm_add_epi32(a1, round), KERNEL_BITS as i32);
+                _mm_storeu_si128(
+                    out.as_mut_ptr().add(c) as *mut __m128i,
+                    _mm_packs_epi32(a0, a1),
+                );
+            }
+        }
+        blocks * 8
+    }
+}
+
+/// Vertical pass: `rows(j)` is the row at offset `j - radius` (already clamped by the caller).
 pub fn blur_column<'r>(
     rows: impl Fn(usize) -> &'r [i16],
     taps: &[i32],
@@ -92,23 +169,12 @@ pub fn blur_column<'r>(
     acc: &mut [i32],
     out: &mut [i16],
 ) {
-    let w = out.len().min(acc.len());
-    let acc = &mut acc[..w];
-    let centre = rows(radius);
-    let k0 = taps[0];
-    for (a, &p) in acc.iter_mut().zip(&centre[..w]) {
-        *a = k0 * p as i32;
+    let radius = radius.min(MAX_RADIUS);
+    let mut list: [&[i16]; 2 * MAX_RADIUS + 1] = [&[]; 2 * MAX_RADIUS + 1];
+    for (j, row) in list.iter_mut().enumerate().take(2 * radius + 1) {
+        *row = rows(j);
     }
-    for (j, &kj) in taps.iter().enumerate().take(radius + 1).skip(1) {
-        let lo = &rows(radius - j)[..w];
-        let hi = &rows(radius + j)[..w];
-        for ((a, &l), &h) in acc.iter_mut().zip(lo).zip(hi) {
-            *a += kj * (l as i32 + h as i32);
-        }
-    }
-    for (o, &a) in out[..w].iter_mut().zip(acc.iter()) {
-        *o = round_q14(a);
-    }
+    convolve(&list[..2 * radius + 1], taps, radius, acc, out);
 }
 
 /// Vertical pass over u8 rows, scaling to the 6-fractional-bit level format.
@@ -121,22 +187,23 @@ pub fn blur_column_u8<'r>(
 ) {
     let w = out.len().min(acc.len());
     let acc = &mut acc[..w];
-    let shift = super::config::FRAC_BITS;
     let centre = rows(radius);
-    let k0 = taps[0] << shift;
+    let k0 = taps[0] as i16 as i32;
     for (a, &p) in acc.iter_mut().zip(&centre[..w]) {
-        *a = k0 * p as i32;
+        *a = k0 * p as i16 as i32;
     }
     for (j, &t) in taps.iter().enumerate().take(radius + 1).skip(1) {
-        let kj = t << shift;
+        let kj = t as i16 as i32;
         let lo = &rows(radius - j)[..w];
         let hi = &rows(radius + j)[..w];
         for ((a, &l), &h) in acc.iter_mut().zip(lo).zip(hi) {
-            *a += kj * (l as i32 + h as i32);
+            *a += kj * (l as i16 + h as i16) as i32;
         }
     }
+    // Q14 taps times 2^6 fractional bits: shift by 14 - 6.
+    let shift = KERNEL_BITS - super::config::FRAC_BITS;
     for (o, &a) in out[..w].iter_mut().zip(acc.iter()) {
-        *o = round_q14(a);
+        *o = ((a + (1 << (shift - 1))) >> shift) as i16;
     }
 }
 
@@ -171,16 +238,16 @@ mod tests {
     fn blur_matches_float_convolution() {
         let mut taps = [0i32; KERNEL_STRIDE];
         make_kernel(1.5, 5, &mut taps);
-        let input: [i16; 32] = core::array::from_fn(|i| ((i * 37) % 101) as i16 * 64);
-        let mut pad = [0i16; 32 + 2 * KERNEL_STRIDE];
-        let mut acc = [0i32; 32];
-        let mut out = [0i16; 32];
+        let input: [i16; 37] = core::array::from_fn(|i| ((i * 37) % 101) as i16 * 64);
+        let mut pad = [0i16; 37 + 2 * KERNEL_STRIDE];
+        let mut acc = [0i32; 37];
+        let mut out = [0i16; 37];
         blur_row(&input, &taps, 5, &mut pad, &mut acc, &mut out);
         for (c, &o) in out.iter().enumerate() {
             let mut f = 0.0f64;
             for j in -5i32..=5 {
                 let k = taps[j.unsigned_abs() as usize] as f64 / 16384.0;
-                let cc = (c as i32 + j).clamp(0, 31) as usize;
+                let cc = (c as i32 + j).clamp(0, 36) as usize;
                 f += k * input[cc] as f64;
             }
             assert!((f - o as f64).abs() <= 0.5 + 1e-9, "c {c}: {f} vs {o}");

@@ -15,9 +15,10 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Where to write the synthetic dataset and the baseline (default: ./demo_out).
-    #[arg(long, default_value = "demo_out")]
-    pub out: PathBuf,
+    /// Where to write the synthetic dataset and the baseline (default: the
+    /// system temporary directory's `phototraverse-demo`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
     /// Number of epochs to synthesize.
     #[arg(long, default_value_t = 30)]
     pub frames: usize,
@@ -63,7 +64,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     println!("phototraverse demo: the photogrammetric traverse is NOT wired yet.");
     println!("This synthesizes the `straight` street and evaluates a trivial constant-velocity");
     println!("dead-reckoning estimate against its ground truth: a baseline, not a result.\n");
-    let dataset = a.out.join("straight");
+    let out = a
+        .out
+        .unwrap_or_else(|| std::env::temp_dir().join("phototraverse-demo"));
+    let dataset = out.join("straight");
     let mut opts = SynthOptions::new("straight", dataset.clone());
     opts.frames = Some(a.frames.max(2));
     opts.progress = std::io::stderr().is_terminal();
@@ -78,12 +82,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     );
     let gt = read_poses(&dataset.join("gt_poses.txt"))?;
     let est = constant_velocity(&gt[0], &gt[1], gt.len());
-    let est_path = a.out.join("baseline_poses.txt");
+    let est_path = out.join("baseline_poses.txt");
     write_poses(&est_path, &est)?;
     let e = evaluate(&gt, &est)?;
     println!("\nbaseline (constant velocity from the first step) vs ground truth:");
     print!("{}", e.summary());
-    let json = a.out.join("baseline_eval.json");
+    let json = out.join("baseline_eval.json");
     std::fs::write(&json, serde_json::to_string_pretty(&e)? + "\n")
         .with_context(|| json.display().to_string())?;
     println!("\nwrote {} and {}", est_path.display(), json.display());

@@ -106,5 +106,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         s.threads,
         s.edge_fraction * 100.0
     );
+    if let Some(cpu) = s.render_cpu_ms_mean {
+        println!(
+            "render CPU time per image: {:.1} ms (= {:.1} ms wall on {} idle cores)",
+            cpu,
+            cpu / s.threads.max(1) as f64,
+            s.threads
+        );
+    }
     Ok(())
 }

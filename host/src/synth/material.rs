@@ -124,7 +124,7 @@ fn albedo(m: &Material, s: &Surface) -> f64 {
         }
         Material::Car { seed, shade } => {
             let (u, v) = (s.hit.uv[0], s.hit.uv[1]);
-            let grime = fbm(u, v, seed, 0.8, 5, 0.55, fp);
+            let grime = fbm(u, v, seed, 0.8, 3, 0.6, fp);
             (shade as f64 * (1.0 + 0.25 * grime)).clamp(0.02, 1.0)
         }
         Material::Glass { seed } => {
@@ -133,7 +133,7 @@ fn albedo(m: &Material, s: &Surface) -> f64 {
         }
         Material::Pole { seed } => {
             let (u, v) = (s.hit.uv[0], s.hit.uv[1]);
-            0.45 + 0.12 * fbm(u * 4.0, v, seed, 0.5, 5, 0.6, fp)
+            0.45 + 0.12 * fbm(u * 4.0, v, seed, 0.5, 3, 0.6, fp)
         }
         Material::Flat { shade } => shade as f64,
         Material::Emissive { value } => value as f64,
@@ -161,13 +161,15 @@ fn ground(segment: u32, s: &Surface) -> f64 {
         let grout_u = periodic(sa + 0.015, 0.03, 0.5, fp);
         let grout_v = periodic(ad - 5.0 + 0.015, 0.03, 0.5, fp);
         let grout = 1.0 - (1.0 - grout_u) * (1.0 - grout_v);
-        let grain = fbm(x, y, 91, 2.0, 7, 0.6, fp);
+        let grain = fbm(x, y, 91, 1.0, 5, 0.7, fp);
         let kerb = stripe(ad - 5.075, 0.075, fp);
         let base = slab * (1.0 - 0.4 * grout) * (1.0 + 0.25 * grain);
         return base * (1.0 - kerb) + 0.7 * kerb;
     }
     // Asphalt: multi-scale grain, repair patches, tyre darkening.
-    let grain = fbm(x, y, 13, 3.0, 8, 0.62, fp);
+    // Aggregate: one fine octave (2 cm stones) on top of the band-limited fBm.
+    let stones = band_weight(0.02, fp) * value2(x * 50.0, y * 50.0, 17);
+    let grain = fbm(x, y, 13, 1.5, 5, 0.75, fp) + 0.5 * stones;
     let patch = value2(x / 7.0, y / 7.0, 29);
     let patch = if patch > 0.45 { 0.8 } else { 1.0 };
     let tyre = 1.0 - 0.08 * (stripe(ad - 1.75 + 0.8, 0.35, fp) + stripe(ad - 1.75 - 0.8, 0.35, fp));
@@ -203,7 +205,7 @@ fn facade(
     v: f64,
     fp: f64,
 ) -> f64 {
-    let dirt = fbm(u, v, seed ^ 0x55, 6.0, 4, 0.5, fp);
+    let dirt = fbm(u, v, seed ^ 0x55, 6.0, 3, 0.5, fp);
     let mut wall = shade * (1.0 + 0.18 * dirt);
     if brick {
         // 0.25 x 0.075 m bricks in running bond, mortar lines, per-brick shade.
@@ -216,7 +218,7 @@ fn facade(
             - (1.0 - periodic(v, 0.012, 0.075, fp)) * (1.0 - periodic(u + off, 0.012, 0.25, fp));
         wall *= (1.0 + b) * (1.0 - 0.35 * mortar * w.max(0.3));
     } else {
-        wall *= 1.0 + 0.15 * fbm(u, v, seed, 1.5, 7, 0.6, fp);
+        wall *= 1.0 + 0.2 * fbm(u, v, seed, 1.0, 5, 0.75, fp);
     }
     // Windows: per-floor grid, each window its own glass shade.
     let floor = fast_floor(v / floor_h) as f64;
@@ -273,7 +275,7 @@ pub fn sky(sky: &Sky, d: &V3) -> f64 {
             }
             // Clouds on a plane 1 km up; their projection fades near the horizon.
             let k = 1000.0 / elev;
-            let c = fbm(d[0] * k, d[1] * k, *seed, 400.0, 5, 0.55, 1.0);
+            let c = fbm(d[0] * k, d[1] * k, *seed, 400.0, 4, 0.55, 1.0);
             base * (1.0 + 0.12 * c * (elev * 4.0).min(1.0))
         }
     }

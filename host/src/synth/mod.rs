@@ -76,9 +76,24 @@ pub struct SynthSummary {
     /// Mean and maximum ray-casting time of one image, ms (without writing).
     pub render_ms_mean: f64,
     pub render_ms_max: f64,
+    /// Process CPU time spent rendering one image, ms (Linux `/proc/self/stat`;
+    /// None elsewhere). On an idle machine the wall time is about this divided by `threads`.
+    pub render_cpu_ms_mean: Option<f64>,
     /// Share of pixels supersampled as silhouettes.
     pub edge_fraction: f64,
     pub threads: usize,
+}
+
+/// Process CPU time (user + system) in ms, from `/proc/self/stat` (Linux).
+pub fn process_cpu_ms() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name in parentheses: utime and stime are the 12th and 13th.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let utime: f64 = fields.get(11)?.parse().ok()?;
+    let stime: f64 = fields.get(12)?.parse().ok()?;
+    // USER_HZ is 100 on every Linux configuration in use.
+    Some((utime + stime) * 10.0)
 }
 
 fn mix(seed: u64, k: u64, cam: u64) -> u64 {
@@ -164,6 +179,7 @@ pub fn generate(opts: &SynthOptions) -> anyhow::Result<SynthSummary> {
         indicatif::ProgressBar::hidden()
     };
     let (mut ms_sum, mut ms_max, mut edges, mut images) = (0.0f64, 0.0f64, 0usize, 0usize);
+    let mut cpu_sum: Option<f64> = None;
     let imp = opts.imperfections;
     for (k, left_pose) in poses.iter().enumerate() {
         let right_pose = render_rig.right_pose(left_pose);
@@ -175,6 +191,7 @@ pub fn generate(opts: &SynthOptions) -> anyhow::Result<SynthSummary> {
         .enumerate()
         {
             let t0 = Instant::now();
+            let cpu0 = process_cpu_ms();
             let (w, h) = (cam.width_px as usize, cam.height_px as usize);
             let (mut radiance, depth, edge_pixels) = match &plan.hard {
                 Some(hard) if hard.subframes > 1 => {
@@ -214,6 +231,9 @@ pub fn generate(opts: &SynthOptions) -> anyhow::Result<SynthSummary> {
                 }
             };
             let ms = t0.elapsed().as_secs_f64() * 1e3;
+            if let (Some(a), Some(b)) = (cpu0, process_cpu_ms()) {
+                cpu_sum = Some(cpu_sum.unwrap_or(0.0) + (b - a));
+            }
             ms_sum += ms;
             ms_max = ms_max.max(ms);
             edges += edge_pixels;
@@ -269,6 +289,7 @@ pub fn generate(opts: &SynthOptions) -> anyhow::Result<SynthSummary> {
         path_length_m: plan.stations[plan.frames - 1] - plan.stations[0],
         render_ms_mean: ms_sum / images.max(1) as f64,
         render_ms_max: ms_max,
+        render_cpu_ms_mean: cpu_sum.map(|c| c / images.max(1) as f64),
         edge_fraction: edges as f64 / (images.max(1) as f64 * w as f64 * h as f64),
         threads: rayon::current_num_threads(),
     };

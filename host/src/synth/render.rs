@@ -4,7 +4,7 @@
 //!
 //! Speed: primitives are clipped against the near plane, projected (in
 //! corrected photo-coordinates, where a convex polygon stays convex) and
-//! binned into 16x16-pixel tiles, sorted by their nearest depth so a pixel
+//! binned into 8x8-pixel tiles, sorted by their nearest depth so a pixel
 //! stops at the first candidate farther than its current hit. One ray per
 //! pixel finds the visible primitive; pixels whose neighbours see another
 //! primitive (silhouettes) are re-rendered with `edge_ss x edge_ss` rays.
@@ -15,7 +15,7 @@ use super::scene::{Primitive, Scene};
 use phototraverse_core::camera::{Interior, Pose};
 use rayon::prelude::*;
 
-const TILE: usize = 16;
+const TILE: usize = 8;
 /// Near plane, metres.
 const NEAR: f64 = 0.05;
 const SKY_ID: u32 = u32::MAX;
@@ -177,7 +177,7 @@ impl<'a> Frame<'a> {
                 bx[2] = bx[2].max(x);
                 bx[3] = bx[3].max(y);
             };
-            let steps = TILE * 2;
+            let steps = TILE;
             for k in 0..=steps {
                 let a = k as f64 / steps as f64;
                 add(c0 + (c1 - c0) * a, r0);
@@ -204,6 +204,14 @@ impl<'a> Frame<'a> {
                 ]
             });
 
+        // Extents of each tile column (x) and row (y) over the whole image.
+        let mut col_ext = vec![[f64::MAX, f64::MIN]; tiles_x];
+        let mut row_ext = vec![[f64::MAX, f64::MIN]; tiles_y];
+        for (t, b) in tile_box.iter().enumerate() {
+            let (tx, ty) = (t % tiles_x, t / tiles_x);
+            col_ext[tx] = [col_ext[tx][0].min(b[0]), col_ext[tx][1].max(b[2])];
+            row_ext[ty] = [row_ext[ty][0].min(b[1]), row_ext[ty][1].max(b[3])];
+        }
         let f = cam.focal_mm;
         let mut prims = Vec::new();
         let mut near = Vec::new();
@@ -254,9 +262,29 @@ impl<'a> Frame<'a> {
             let index = prims.len() as u32;
             prims.push(p);
             near.push(depth_min.max(0.0));
-            for (t, tb) in tile_box.iter().enumerate() {
-                if bb[2] >= tb[0] && bb[0] <= tb[2] && bb[3] >= tb[1] && bb[1] <= tb[3] {
-                    bins[t].push(index);
+            // Tile columns and rows whose extents can overlap, then the exact test.
+            let cols = col_ext
+                .iter()
+                .enumerate()
+                .filter(|(_, e)| bb[2] >= e[0] && bb[0] <= e[1])
+                .map(|(i, _)| i);
+            let (c0, c1) = cols.fold((usize::MAX, 0), |a, i| (a.0.min(i), a.1.max(i)));
+            let rows = row_ext
+                .iter()
+                .enumerate()
+                .filter(|(_, e)| bb[3] >= e[0] && bb[1] <= e[1])
+                .map(|(i, _)| i);
+            let (r0, r1) = rows.fold((usize::MAX, 0), |a, i| (a.0.min(i), a.1.max(i)));
+            if c0 == usize::MAX || r0 == usize::MAX {
+                continue;
+            }
+            for ty in r0..=r1 {
+                for tx in c0..=c1 {
+                    let t = ty * tiles_x + tx;
+                    let tb = &tile_box[t];
+                    if bb[2] >= tb[0] && bb[0] <= tb[2] && bb[3] >= tb[1] && bb[1] <= tb[3] {
+                        bins[t].push(index);
+                    }
                 }
             }
         }

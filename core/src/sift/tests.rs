@@ -1,1 +1,0 @@
-//! Extractor tests: synthetic images with known structure, memory, determinism, bad input.

@@ -1,0 +1,988 @@
+//! Block files for `phototraverse adjust` (format: docs/block-format.md).
+//!
+//! A block is a directory of whitespace-separated text files, `#` starts a
+//! comment: `block.txt` (cameras, rig, settings), `images.txt` (approximate
+//! exterior orientation of the left camera per epoch), `observations.txt`
+//! (tie points in pixels), and the optional `control.txt`, `gnss.txt`,
+//! `odometer.txt`. Every parse error names the file and the line.
+
+use anyhow::{anyhow, Context, Result};
+use phototraverse_core::adjust::geometry::{camera_pose, Camera, RigParams};
+use phototraverse_core::adjust::weighting::{weights, Scheme};
+use phototraverse_core::adjust::{
+    intersect, AdjustConfig, ConstraintSigmas, Observation, Ray, Report, Robust, Window,
+};
+use phototraverse_core::budget::{Arena, MemoryBudget};
+use phototraverse_core::camera::{Interior, Pose, Rig};
+use std::collections::{BTreeMap, HashMap};
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// Observation weighting of a block (seed 000's schemes or the measuring precision).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Weighting {
+    Sigma,
+    Parallax,
+    Radial,
+    Equal,
+}
+
+/// Blunder treatment of a block.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RobustKind {
+    Snooping,
+    None,
+    Seed,
+}
+
+/// Settings of `block.txt`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Settings {
+    pub sigma_px: f64,
+    pub weighting: Weighting,
+    pub robust: RobustKind,
+    pub estimate_rig: bool,
+    /// Datum sigmas: degrees, metres.
+    pub datum_sigma: (f64, f64),
+    /// Rig prior sigmas: degrees, metres.
+    pub rig_sigma: (f64, f64),
+    /// Base length constraint: value and sigma, metres.
+    pub base_length: Option<(f64, f64)>,
+    /// Motion smoothness sigma, m/s.
+    pub velocity_sigma: Option<f64>,
+    pub max_iterations: usize,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            sigma_px: 0.3,
+            weighting: Weighting::Sigma,
+            robust: RobustKind::Snooping,
+            estimate_rig: false,
+            datum_sigma: (1e-4, 1e-4),
+            rig_sigma: (0.05, 0.001),
+            base_length: None,
+            velocity_sigma: None,
+            max_iterations: 50,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Image {
+    pub epoch: u32,
+    pub time_s: f64,
+    pub pose: Pose,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PixelObservation {
+    /// Line in observations.txt (1-based).
+    pub line: usize,
+    pub point: u64,
+    pub epoch: u32,
+    pub camera: Camera,
+    /// Column, row (pixel centres at integers).
+    pub px: [f64; 2],
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ControlPoint {
+    pub point: u64,
+    pub xyz: [f64; 3],
+    pub sigma_m: f64,
+}
+
+/// A block read from files.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Block {
+    pub rig: Rig,
+    pub settings: Settings,
+    pub images: Vec<Image>,
+    pub observations: Vec<PixelObservation>,
+    pub control: Vec<ControlPoint>,
+    /// (epoch, position, sigma m)
+    pub gnss: Vec<(u32, [f64; 3], f64)>,
+    /// (epoch, distance from the previous epoch, sigma m)
+    pub odometer: Vec<(u32, f64, f64)>,
+}
+
+/// Lines of a file without comments and blanks: (1-based line number, fields).
+fn lines(path: &Path) -> Result<Vec<(usize, Vec<String>)>> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
+    Ok(text
+        .lines()
+        .enumerate()
+        .filter_map(|(i, l)| {
+            let body = l.split('#').next().unwrap_or("").trim();
+            (!body.is_empty())
+                .then(|| (i + 1, body.split_whitespace().map(str::to_string).collect()))
+        })
+        .collect())
+}
+
+/// Error at `file:line`.
+fn at(path: &Path, line: usize, msg: impl std::fmt::Display) -> anyhow::Error {
+    anyhow!("{}:{}: {}", path.display(), line, msg)
+}
+
+fn nums<const N: usize>(path: &Path, line: usize, f: &[String], what: &str) -> Result<[f64; N]> {
+    if f.len() != N {
+        return Err(at(
+            path,
+            line,
+            format!("{what}: expected {N} numbers, found {}", f.len()),
+        ));
+    }
+    let mut out = [0.0; N];
+    for (o, s) in out.iter_mut().zip(f) {
+        *o = s
+            .parse::<f64>()
+            .map_err(|_| at(path, line, format!("{what}: `{s}` is not a number")))?;
+        if !o.is_finite() {
+            return Err(at(path, line, format!("{what}: `{s}` is not finite")));
+        }
+    }
+    Ok(out)
+}
+
+fn int<T: std::str::FromStr>(path: &Path, line: usize, s: &str, what: &str) -> Result<T> {
+    s.parse::<T>().map_err(|_| {
+        at(
+            path,
+            line,
+            format!("{what}: `{s}` is not a non-negative integer"),
+        )
+    })
+}
+
+impl Block {
+    /// Reads a block directory.
+    pub fn read(dir: &Path) -> Result<Block> {
+        let bpath = dir.join("block.txt");
+        let mut left = None;
+        let mut right = None;
+        let mut rel = [0.0; 3];
+        let mut base = None;
+        let mut s = Settings::default();
+        for (ln, f) in lines(&bpath)? {
+            let key = f[0].as_str();
+            let rest = &f[1..];
+            match key {
+                "camera" => {
+                    if rest.is_empty() {
+                        return Err(at(
+                            &bpath,
+                            ln,
+                            "camera: expected `left` or `right` and 11 values",
+                        ));
+                    }
+                    let v: [f64; 11] = nums(&bpath, ln, &rest[1..], "camera")?;
+                    let cam = Interior {
+                        width_px: v[0] as u32,
+                        height_px: v[1] as u32,
+                        pixel_size_mm: [v[2], v[3]],
+                        focal_mm: v[4],
+                        principal_point_mm: [v[5], v[6]],
+                        radial: [v[7], v[8]],
+                        decentering: [v[9], v[10]],
+                    };
+                    cam.validate()
+                        .map_err(|e| at(&bpath, ln, format!("camera: {e}")))?;
+                    match rest[0].as_str() {
+                        "left" => left = Some(cam),
+                        "right" => right = Some(cam),
+                        other => {
+                            return Err(at(
+                                &bpath,
+                                ln,
+                                format!("camera: `{other}` is not left or right"),
+                            ))
+                        }
+                    }
+                }
+                "relative_deg" => rel = nums(&bpath, ln, rest, "relative_deg")?,
+                "base_m" => base = Some(nums::<3>(&bpath, ln, rest, "base_m")?),
+                "sigma_px" => {
+                    s.sigma_px = nums::<1>(&bpath, ln, rest, "sigma_px")?[0];
+                    if s.sigma_px <= 0.0 {
+                        return Err(at(&bpath, ln, "sigma_px must be positive"));
+                    }
+                }
+                "weighting" => {
+                    s.weighting = match rest.first().map(String::as_str) {
+                        Some("sigma") => Weighting::Sigma,
+                        Some("parallax") => Weighting::Parallax,
+                        Some("radial") => Weighting::Radial,
+                        Some("equal") => Weighting::Equal,
+                        _ => {
+                            return Err(at(
+                                &bpath,
+                                ln,
+                                "weighting: expected sigma, parallax, radial or equal",
+                            ))
+                        }
+                    }
+                }
+                "robust" => {
+                    s.robust = match rest.first().map(String::as_str) {
+                        Some("snooping") => RobustKind::Snooping,
+                        Some("none") => RobustKind::None,
+                        Some("seed") => RobustKind::Seed,
+                        _ => return Err(at(&bpath, ln, "robust: expected snooping, none or seed")),
+                    }
+                }
+                "estimate_rig" => {
+                    s.estimate_rig = match rest.first().map(String::as_str) {
+                        Some("yes") => true,
+                        Some("no") => false,
+                        _ => return Err(at(&bpath, ln, "estimate_rig: expected yes or no")),
+                    }
+                }
+                "datum_sigma" => {
+                    let v: [f64; 2] = nums(&bpath, ln, rest, "datum_sigma")?;
+                    if v[0] <= 0.0 || v[1] <= 0.0 {
+                        return Err(at(&bpath, ln, "datum_sigma must be positive"));
+                    }
+                    s.datum_sigma = (v[0], v[1]);
+                }
+                "rig_sigma" => {
+                    let v: [f64; 2] = nums(&bpath, ln, rest, "rig_sigma")?;
+                    if v[0] <= 0.0 || v[1] <= 0.0 {
+                        return Err(at(&bpath, ln, "rig_sigma must be positive"));
+                    }
+                    s.rig_sigma = (v[0], v[1]);
+                }
+                "base_length" => {
+                    let v: [f64; 2] = nums(&bpath, ln, rest, "base_length")?;
+                    if v[1] <= 0.0 {
+                        return Err(at(&bpath, ln, "base_length sigma must be positive"));
+                    }
+                    s.base_length = Some((v[0], v[1]));
+                }
+                "velocity_sigma" => {
+                    let v: [f64; 1] = nums(&bpath, ln, rest, "velocity_sigma")?;
+                    if v[0] <= 0.0 {
+                        return Err(at(&bpath, ln, "velocity_sigma must be positive"));
+                    }
+                    s.velocity_sigma = Some(v[0]);
+                }
+                "max_iterations" => {
+                    s.max_iterations = int(
+                        &bpath,
+                        ln,
+                        rest.first().map(String::as_str).unwrap_or(""),
+                        "max_iterations",
+                    )?;
+                    if s.max_iterations == 0 {
+                        return Err(at(&bpath, ln, "max_iterations must be at least 1"));
+                    }
+                }
+                other => return Err(at(&bpath, ln, format!("unknown keyword `{other}`"))),
+            }
+        }
+        let left = left.ok_or_else(|| at(&bpath, 0, "missing `camera left`"))?;
+        let right = right.unwrap_or(left);
+        let base = base.ok_or_else(|| at(&bpath, 0, "missing `base_m`"))?;
+        let rig = Rig {
+            left,
+            right,
+            relative_angles: [
+                rel[0].to_radians(),
+                rel[1].to_radians(),
+                rel[2].to_radians(),
+            ],
+            base_m: base,
+        };
+        if rig.base_length() <= 0.0 {
+            return Err(at(&bpath, 0, "the base must not be zero"));
+        }
+
+        let ipath = dir.join("images.txt");
+        let mut images = Vec::new();
+        for (ln, f) in lines(&ipath)? {
+            if f.len() != 8 {
+                return Err(at(
+                    &ipath,
+                    ln,
+                    format!(
+                        "expected `epoch time omega phi kappa X Y Z` (8 fields), found {}",
+                        f.len()
+                    ),
+                ));
+            }
+            let epoch: u32 = int(&ipath, ln, &f[0], "epoch")?;
+            if epoch as usize != images.len() {
+                return Err(at(
+                    &ipath,
+                    ln,
+                    format!(
+                        "epochs must be 0, 1, 2, ... in order; expected {}",
+                        images.len()
+                    ),
+                ));
+            }
+            let v: [f64; 7] = nums(&ipath, ln, &f[1..], "image")?;
+            images.push(Image {
+                epoch,
+                time_s: v[0],
+                pose: Pose::from_degrees(v[1], v[2], v[3], [v[4], v[5], v[6]]),
+            });
+        }
+        if images.is_empty() {
+            return Err(at(&ipath, 0, "no images"));
+        }
+
+        let opath = dir.join("observations.txt");
+        let mut observations = Vec::new();
+        for (ln, f) in lines(&opath)? {
+            if f.len() != 5 {
+                return Err(at(
+                    &opath,
+                    ln,
+                    format!(
+                        "expected `point epoch L|R column row` (5 fields), found {}",
+                        f.len()
+                    ),
+                ));
+            }
+            let point: u64 = int(&opath, ln, &f[0], "point")?;
+            let epoch: u32 = int(&opath, ln, &f[1], "epoch")?;
+            if epoch as usize >= images.len() {
+                return Err(at(
+                    &opath,
+                    ln,
+                    format!("epoch {epoch} is not in images.txt"),
+                ));
+            }
+            let camera = match f[2].as_str() {
+                "L" | "l" => Camera::Left,
+                "R" | "r" => Camera::Right,
+                other => return Err(at(&opath, ln, format!("camera `{other}` is not L or R"))),
+            };
+            let px: [f64; 2] = nums(&opath, ln, &f[3..], "pixel")?;
+            observations.push(PixelObservation {
+                line: ln,
+                point,
+                epoch,
+                camera,
+                px,
+            });
+        }
+
+        let mut control = Vec::new();
+        let cpath = dir.join("control.txt");
+        if cpath.exists() {
+            for (ln, f) in lines(&cpath)? {
+                if f.len() != 5 {
+                    return Err(at(&cpath, ln, "expected `point X Y Z sigma_m`"));
+                }
+                let point: u64 = int(&cpath, ln, &f[0], "point")?;
+                let v: [f64; 4] = nums(&cpath, ln, &f[1..], "control point")?;
+                if v[3] <= 0.0 {
+                    return Err(at(&cpath, ln, "sigma must be positive"));
+                }
+                control.push(ControlPoint {
+                    point,
+                    xyz: [v[0], v[1], v[2]],
+                    sigma_m: v[3],
+                });
+            }
+        }
+        let mut gnss = Vec::new();
+        let gpath = dir.join("gnss.txt");
+        if gpath.exists() {
+            for (ln, f) in lines(&gpath)? {
+                if f.len() != 5 {
+                    return Err(at(&gpath, ln, "expected `epoch X Y Z sigma_m`"));
+                }
+                let e: u32 = int(&gpath, ln, &f[0], "epoch")?;
+                let v: [f64; 4] = nums(&gpath, ln, &f[1..], "gnss")?;
+                if e as usize >= images.len() || v[3] <= 0.0 {
+                    return Err(at(&gpath, ln, "unknown epoch or non-positive sigma"));
+                }
+                gnss.push((e, [v[0], v[1], v[2]], v[3]));
+            }
+        }
+        let mut odometer = Vec::new();
+        let dpath = dir.join("odometer.txt");
+        if dpath.exists() {
+            for (ln, f) in lines(&dpath)? {
+                if f.len() != 3 {
+                    return Err(at(&dpath, ln, "expected `epoch distance_m sigma_m`"));
+                }
+                let e: u32 = int(&dpath, ln, &f[0], "epoch")?;
+                let v: [f64; 2] = nums(&dpath, ln, &f[1..], "odometer")?;
+                if e == 0 || e as usize >= images.len() || v[1] <= 0.0 {
+                    return Err(at(
+                        &dpath,
+                        ln,
+                        "epoch must be 1.. in images.txt and sigma positive",
+                    ));
+                }
+                odometer.push((e, v[0], v[1]));
+            }
+        }
+        Ok(Block {
+            rig,
+            settings: s,
+            images,
+            observations,
+            control,
+            gnss,
+            odometer,
+        })
+    }
+
+    /// Writes the block's files into `dir`.
+    pub fn write(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir)?;
+        let mut b = String::from("# phototraverse block (docs/block-format.md)\n");
+        for (name, c) in [("left", &self.rig.left), ("right", &self.rig.right)] {
+            writeln!(
+                b,
+                "camera {name} {} {} {} {} {} {} {} {:e} {:e} {:e} {:e}",
+                c.width_px,
+                c.height_px,
+                c.pixel_size_mm[0],
+                c.pixel_size_mm[1],
+                c.focal_mm,
+                c.principal_point_mm[0],
+                c.principal_point_mm[1],
+                c.radial[0],
+                c.radial[1],
+                c.decentering[0],
+                c.decentering[1]
+            )?;
+        }
+        let r = self.rig.relative_angles;
+        writeln!(
+            b,
+            "relative_deg {} {} {}",
+            r[0].to_degrees(),
+            r[1].to_degrees(),
+            r[2].to_degrees()
+        )?;
+        writeln!(
+            b,
+            "base_m {} {} {}",
+            self.rig.base_m[0], self.rig.base_m[1], self.rig.base_m[2]
+        )?;
+        let s = &self.settings;
+        writeln!(b, "sigma_px {}", s.sigma_px)?;
+        let w = match s.weighting {
+            Weighting::Sigma => "sigma",
+            Weighting::Parallax => "parallax",
+            Weighting::Radial => "radial",
+            Weighting::Equal => "equal",
+        };
+        writeln!(b, "weighting {w}")?;
+        let rb = match s.robust {
+            RobustKind::Snooping => "snooping",
+            RobustKind::None => "none",
+            RobustKind::Seed => "seed",
+        };
+        writeln!(b, "robust {rb}")?;
+        writeln!(
+            b,
+            "estimate_rig {}",
+            if s.estimate_rig { "yes" } else { "no" }
+        )?;
+        writeln!(b, "datum_sigma {} {}", s.datum_sigma.0, s.datum_sigma.1)?;
+        writeln!(b, "rig_sigma {} {}", s.rig_sigma.0, s.rig_sigma.1)?;
+        if let Some((v, sg)) = s.base_length {
+            writeln!(b, "base_length {v} {sg}")?;
+        }
+        if let Some(v) = s.velocity_sigma {
+            writeln!(b, "velocity_sigma {v}")?;
+        }
+        writeln!(b, "max_iterations {}", s.max_iterations)?;
+        std::fs::write(dir.join("block.txt"), b)?;
+
+        let mut t = String::from(
+            "# epoch time_s omega_deg phi_deg kappa_deg X_m Y_m Z_m  (left camera, approximate)\n",
+        );
+        for im in &self.images {
+            let p = &im.pose;
+            writeln!(
+                t,
+                "{} {:.3} {:.6} {:.6} {:.6} {:.4} {:.4} {:.4}",
+                im.epoch,
+                im.time_s,
+                p.omega.to_degrees(),
+                p.phi.to_degrees(),
+                p.kappa.to_degrees(),
+                p.centre[0],
+                p.centre[1],
+                p.centre[2]
+            )?;
+        }
+        std::fs::write(dir.join("images.txt"), t)?;
+        let mut o = String::from("# point epoch camera(L|R) column row  (pixels, (0,0) = centre of the top-left pixel)\n");
+        for ob in &self.observations {
+            let c = if ob.camera == Camera::Left { "L" } else { "R" };
+            writeln!(
+                o,
+                "{} {} {c} {:.3} {:.3}",
+                ob.point, ob.epoch, ob.px[0], ob.px[1]
+            )?;
+        }
+        std::fs::write(dir.join("observations.txt"), o)?;
+        if !self.control.is_empty() {
+            let mut c = String::from("# point X_m Y_m Z_m sigma_m\n");
+            for cp in &self.control {
+                writeln!(
+                    c,
+                    "{} {:.4} {:.4} {:.4} {}",
+                    cp.point, cp.xyz[0], cp.xyz[1], cp.xyz[2], cp.sigma_m
+                )?;
+            }
+            std::fs::write(dir.join("control.txt"), c)?;
+        }
+        if !self.gnss.is_empty() {
+            let mut g = String::from("# epoch X_m Y_m Z_m sigma_m\n");
+            for (e, x, sg) in &self.gnss {
+                writeln!(g, "{e} {:.4} {:.4} {:.4} {sg}", x[0], x[1], x[2])?;
+            }
+            std::fs::write(dir.join("gnss.txt"), g)?;
+        }
+        if !self.odometer.is_empty() {
+            let mut d = String::from("# epoch distance_from_previous_m sigma_m\n");
+            for (e, x, sg) in &self.odometer {
+                writeln!(d, "{e} {x:.4} {sg}")?;
+            }
+            std::fs::write(dir.join("odometer.txt"), d)?;
+        }
+        Ok(())
+    }
+}
+
+/// One adjusted camera of one epoch.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AdjustedImage {
+    pub epoch: u32,
+    pub camera: Camera,
+    pub pose: Pose,
+    /// omega, phi, kappa (rad), X, Y, Z (m).
+    pub std: [f64; 6],
+}
+
+/// One adjusted tie point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AdjustedPoint {
+    pub point: u64,
+    pub xyz: [f64; 3],
+    pub std: [f64; 3],
+    pub observations: usize,
+}
+
+/// A flagged observation with its residual in pixels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Flagged {
+    pub obs: PixelObservation,
+    pub residual_px: [f64; 2],
+}
+
+/// Result of a block adjustment.
+#[derive(Debug, Clone)]
+pub struct Adjusted {
+    pub report: Report,
+    pub images: Vec<AdjustedImage>,
+    pub points: Vec<AdjustedPoint>,
+    /// Points left out (no intersection, too few rays, at infinity).
+    pub skipped_points: Vec<u64>,
+    pub flagged: Vec<Flagged>,
+    pub rig: RigParams,
+    pub rig_std: [f64; 6],
+    pub budget_bytes: usize,
+}
+
+/// Corrected photo-coordinates (mm) of a pixel observation.
+fn corrected(rig: &Rig, o: &PixelObservation) -> [f64; 2] {
+    let cam = if o.camera == Camera::Left {
+        &rig.left
+    } else {
+        &rig.right
+    };
+    cam.pixel_to_corrected(o.px[0], o.px[1])
+}
+
+/// Adjusts a block with the core's window (one window holding every epoch).
+pub fn adjust(block: &Block) -> Result<Adjusted> {
+    let s = &block.settings;
+    let n_epochs = block.images.len();
+    // Points and their observations, in first-seen order.
+    let mut order: Vec<u64> = Vec::new();
+    let mut by_point: HashMap<u64, Vec<usize>> = HashMap::new();
+    for (i, o) in block.observations.iter().enumerate() {
+        by_point.entry(o.point).or_insert_with(|| {
+            order.push(o.point);
+            Vec::new()
+        });
+        by_point.get_mut(&o.point).expect("inserted").push(i);
+    }
+    let control: BTreeMap<u64, ControlPoint> =
+        block.control.iter().map(|c| (c.point, *c)).collect();
+    let robust = match s.robust {
+        RobustKind::Snooping => Robust::snooping(),
+        RobustKind::None => Robust::None,
+        RobustKind::Seed => Robust::SeedReweight {
+            threshold_mm: block.rig.left.pixel_size_mm[0],
+        },
+    };
+    let cfg = AdjustConfig {
+        window: n_epochs,
+        max_points: order.len().max(1),
+        max_observations: block.observations.len().max(1),
+        max_iterations: s.max_iterations,
+        estimate_rig: s.estimate_rig,
+        sigmas: ConstraintSigmas {
+            datum_angle_rad: s.datum_sigma.0.to_radians(),
+            datum_position_m: s.datum_sigma.1,
+            rig_angle_rad: s.rig_sigma.0.to_radians(),
+            rig_base_m: s.rig_sigma.1,
+            base_length_m: s.base_length.map(|b| b.1).unwrap_or(0.0),
+            velocity_change_mps: s.velocity_sigma.unwrap_or(0.0),
+        },
+        robust,
+        ..AdjustConfig::default()
+    };
+    let mut budget = MemoryBudget::new();
+    cfg.budget(&mut budget);
+    let mut mem = vec![0u8; budget.total()];
+    let mut arena = Arena::new(&mut mem);
+    let mut w = Window::new(cfg, &block.rig, &mut arena).map_err(|e| anyhow!("adjustment: {e}"))?;
+    if let Some((b, _)) = s.base_length {
+        w.set_base_length(b);
+    }
+    for im in &block.images {
+        w.add_epoch(&im.pose, im.time_s)
+            .map_err(|e| anyhow!("epoch {}: {e}", im.epoch))?;
+    }
+    for (e, x, sg) in &block.gnss {
+        w.set_gnss(*e, *x, *sg)
+            .map_err(|er| anyhow!("gnss epoch {e}: {er}"))?;
+    }
+    for (e, d, sg) in &block.odometer {
+        w.set_odometer(*e, *d, *sg)
+            .map_err(|er| anyhow!("odometer epoch {e}: {er}"))?;
+    }
+    let rp = RigParams::from_rig(&block.rig);
+    let focal = |c: Camera| {
+        if c == Camera::Left {
+            block.rig.left.focal_mm
+        } else {
+            block.rig.right.focal_mm
+        }
+    };
+    let mut index: HashMap<u64, u32> = HashMap::new();
+    let mut skipped = Vec::new();
+    for pid in &order {
+        let obs = &by_point[pid];
+        let start = match control.get(pid) {
+            Some(c) => Some(c.xyz),
+            None => {
+                let rays: Vec<Ray> = obs
+                    .iter()
+                    .map(|&i| {
+                        let o = &block.observations[i];
+                        let left = block.images[o.epoch as usize].pose;
+                        Ray {
+                            pose: camera_pose(&left, &rp, o.camera),
+                            focal_mm: focal(o.camera),
+                            xy: corrected(&block.rig, o),
+                        }
+                    })
+                    .collect();
+                intersect(&rays, 1e-4).ok().map(|i| i.point)
+            }
+        };
+        let Some(xyz) = start else {
+            skipped.push(*pid);
+            continue;
+        };
+        let id = w.add_point(xyz).map_err(|e| anyhow!("point {pid}: {e}"))?;
+        if let Some(c) = control.get(pid) {
+            w.set_point_prior(id, c.xyz, c.sigma_m)
+                .map_err(|e| anyhow!("control point {pid}: {e}"))?;
+        }
+        index.insert(*pid, id);
+    }
+    // Observations with their weights; the parallax scheme needs the stereo partner.
+    let mut partner: HashMap<(u64, u32, u8), [f64; 2]> = HashMap::new();
+    for o in &block.observations {
+        partner.insert((o.point, o.epoch, o.camera as u8), corrected(&block.rig, o));
+    }
+    let mut obs_of_index = Vec::new();
+    for (i, o) in block.observations.iter().enumerate() {
+        let Some(&pid) = index.get(&o.point) else {
+            continue;
+        };
+        let xy = corrected(&block.rig, o);
+        let cam = if o.camera == Camera::Left {
+            &block.rig.left
+        } else {
+            &block.rig.right
+        };
+        let wt = match s.weighting {
+            Weighting::Sigma => {
+                let sx = s.sigma_px * cam.pixel_size_mm[0];
+                let sy = s.sigma_px * cam.pixel_size_mm[1];
+                [1.0 / (sx * sx), 1.0 / (sy * sy)]
+            }
+            Weighting::Parallax => {
+                let other = partner
+                    .get(&(o.point, o.epoch, 1 - o.camera as u8))
+                    .copied();
+                // Parallax = left minus right whichever image this is.
+                let (l, r) = match (o.camera, other) {
+                    (Camera::Left, Some(q)) => (xy, Some(q)),
+                    (Camera::Right, Some(q)) => (q, Some(xy)),
+                    _ => (xy, None),
+                };
+                weights(Scheme::Parallax, l, r)
+            }
+            Weighting::Radial => weights(Scheme::Radial, xy, None),
+            Weighting::Equal => weights(Scheme::Equal, xy, None),
+        };
+        let wt = [wt[0].max(1e-12), wt[1].max(1e-12)];
+        let mut ob = Observation::new(o.epoch, o.camera, pid, xy, wt);
+        ob.tag = i as u32;
+        w.add_observation(ob)
+            .map_err(|e| anyhow!("observations.txt:{}: {e}", o.line))?;
+        obs_of_index.push(i);
+    }
+    let report = w.solve().map_err(|e| match e {
+        phototraverse_core::adjust::AdjustError::Singular { epoch } => {
+            anyhow!("adjustment failed: {e} (epoch {epoch} of images.txt is not determined by its points)")
+        }
+        _ => anyhow!("adjustment failed: {e}"),
+    })?;
+
+    let rig_now = w.rig();
+    let mut images = Vec::new();
+    for slot in 0..n_epochs {
+        let left = w.epoch_pose(slot).expect("epoch");
+        let std = w.epoch_std(slot).unwrap_or([f64::NAN; 6]);
+        let cov = w.epoch_covariance(slot).unwrap_or([0.0; 36]);
+        let epoch = w.epoch_id(slot).expect("epoch");
+        images.push(AdjustedImage {
+            epoch,
+            camera: Camera::Left,
+            pose: left,
+            std,
+        });
+        let right = camera_pose(&left, &rig_now, Camera::Right);
+        images.push(AdjustedImage {
+            epoch,
+            camera: Camera::Right,
+            pose: right,
+            std: right_std(&left, &rig_now, &cov),
+        });
+    }
+    let mut points = Vec::new();
+    for pid in &order {
+        let Some(&id) = index.get(pid) else { continue };
+        match (w.point(id), w.point_std(id)) {
+            (Some(xyz), Some(std)) => points.push(AdjustedPoint {
+                point: *pid,
+                xyz,
+                std,
+                observations: by_point[pid].len(),
+            }),
+            _ => skipped.push(*pid),
+        }
+    }
+    let mut flagged = Vec::new();
+    for (k, o) in w.observations().iter().enumerate() {
+        if !o.is_flagged() {
+            continue;
+        }
+        let src = block.observations[o.tag as usize];
+        let r = w.residual(k).unwrap_or([f64::NAN; 2]);
+        let cam = if src.camera == Camera::Left {
+            &block.rig.left
+        } else {
+            &block.rig.right
+        };
+        // Residual observed - computed, in pixels (columns right, rows down).
+        flagged.push(Flagged {
+            obs: src,
+            residual_px: [r[0] / cam.pixel_size_mm[0], -r[1] / cam.pixel_size_mm[1]],
+        });
+    }
+    let _ = obs_of_index;
+    Ok(Adjusted {
+        report,
+        images,
+        points,
+        skipped_points: skipped,
+        flagged,
+        rig: rig_now,
+        rig_std: w.rig_std(),
+        budget_bytes: budget.total_with_prefix("adjust."),
+    })
+}
+
+/// Standard deviations of the right camera from the left camera's covariance
+/// (rig held at its estimate): `J Sigma J^T` with `J` by central differences.
+fn right_std(left: &Pose, rig: &RigParams, cov: &[f64; 36]) -> [f64; 6] {
+    let h = 1e-7;
+    let mut j = [[0.0; 6]; 6];
+    for k in 0..6 {
+        let mut a = left.to_params();
+        let mut b = left.to_params();
+        a[k] += h;
+        b[k] -= h;
+        let pa = camera_pose(&Pose::from_params(&a), rig, Camera::Right).to_params();
+        let pb = camera_pose(&Pose::from_params(&b), rig, Camera::Right).to_params();
+        for i in 0..6 {
+            j[i][k] = (pa[i] - pb[i]) / (2.0 * h);
+        }
+    }
+    let mut out = [0.0; 6];
+    for i in 0..6 {
+        let mut v = 0.0;
+        for a in 0..6 {
+            for b in 0..6 {
+                v += j[i][a] * cov[a * 6 + b] * j[i][b];
+            }
+        }
+        out[i] = v.max(0.0).sqrt();
+    }
+    out
+}
+
+/// A synthetic block with known truth: `epochs` stereo pairs about 1 m apart
+/// along +Y with random attitude, `n_points` street points, 0.3 px noise,
+/// every `blunder_every`-th observation (0: none) moved by 10..50 px.
+/// Returns the block and the true poses of the left camera.
+pub fn synthetic_block(
+    seed: u64,
+    epochs: usize,
+    n_points: usize,
+    blunder_every: usize,
+) -> (Block, Vec<Pose>) {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let cam = Interior {
+        width_px: 1280,
+        height_px: 960,
+        pixel_size_mm: [0.005, 0.005],
+        focal_mm: 8.0,
+        principal_point_mm: [0.012, -0.008],
+        radial: [-2.0e-3, 1.0e-5],
+        decentering: [1.0e-5, -2.0e-5],
+    };
+    let rig = Rig {
+        left: cam,
+        right: cam,
+        relative_angles: [0.002, -0.004, 0.001],
+        base_m: [0.5, 0.003, -0.002],
+    };
+    let rp = RigParams::from_rig(&rig);
+    let mut truth = Vec::new();
+    let (mut x, mut y) = (0.0, 0.0);
+    for k in 0..epochs {
+        if k > 0 {
+            y += rng.gen_range(0.8..1.2);
+            x += rng.gen_range(-0.1..0.1);
+        }
+        truth.push(Pose::from_degrees(
+            90.0 + rng.gen_range(-2.0..2.0),
+            rng.gen_range(-2.0..2.0),
+            rng.gen_range(-2.0..2.0),
+            [x, y, 1.5 + rng.gen_range(-0.05..0.05)],
+        ));
+    }
+    let normal = |rng: &mut rand_chacha::ChaCha8Rng| -> f64 {
+        let u1: f64 = rng.gen_range(1e-12..1.0);
+        let u2: f64 = rng.gen_range(0.0..1.0);
+        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+    };
+    let mut observations = Vec::new();
+    let mut n = 0u64;
+    let mut count = 0usize;
+    while (n as usize) < n_points {
+        let p = [
+            rng.gen_range(-8.0..8.0),
+            rng.gen_range(4.0..y + 25.0),
+            rng.gen_range(-1.0..6.0),
+        ];
+        let mut seen = Vec::new();
+        for (e, pose) in truth.iter().enumerate() {
+            for c in [Camera::Left, Camera::Right] {
+                let cp = camera_pose(pose, &rp, c);
+                if cp.to_camera(&p)[2] > -3.0 {
+                    continue;
+                }
+                let Ok(px) = phototraverse_core::camera::project_to_pixel(&cp, &cam, &p) else {
+                    continue;
+                };
+                if px[0] >= 0.0 && px[1] >= 0.0 && px[0] <= 1279.0 && px[1] <= 959.0 {
+                    seen.push((e as u32, c, px));
+                }
+            }
+        }
+        let mut eps: Vec<u32> = seen.iter().map(|s| s.0).collect();
+        eps.dedup();
+        if eps.len() < 2 || seen.len() < 4 {
+            continue;
+        }
+        for (e, c, px) in seen {
+            count += 1;
+            let mut m = [
+                px[0] + 0.3 * normal(&mut rng),
+                px[1] + 0.3 * normal(&mut rng),
+            ];
+            if blunder_every > 0 && count - (count / blunder_every) * blunder_every == 0 {
+                let mag = rng.gen_range(10.0..50.0);
+                let ang: f64 = rng.gen_range(0.0..std::f64::consts::TAU);
+                m[0] += mag * ang.cos();
+                m[1] += mag * ang.sin();
+            }
+            observations.push(PixelObservation {
+                line: 0,
+                point: 100 + n,
+                epoch: e,
+                camera: c,
+                px: m,
+            });
+        }
+        n += 1;
+    }
+    // Approximate orientations: truth with a few cm and tenths of a degree off.
+    let images = truth
+        .iter()
+        .enumerate()
+        .map(|(k, t)| {
+            let mut q = t.to_params();
+            if k > 0 {
+                for (i, qi) in q.iter_mut().enumerate() {
+                    *qi += if i < 3 {
+                        rng.gen_range(-0.005..0.005)
+                    } else {
+                        rng.gen_range(-0.05..0.05)
+                    };
+                }
+            }
+            Image {
+                epoch: k as u32,
+                time_s: 0.2 * k as f64,
+                pose: Pose::from_params(&q),
+            }
+        })
+        .collect();
+    let block = Block {
+        rig,
+        settings: Settings::default(),
+        images,
+        observations,
+        control: Vec::new(),
+        gnss: Vec::new(),
+        odometer: Vec::new(),
+    };
+    (block, truth)
+}

@@ -1,0 +1,106 @@
+//! End to end: `phototraverse features IMAGE --out FILE` writes COLMAP's text format.
+
+use std::process::Command;
+
+fn textured_png(path: &std::path::Path, w: u32, h: u32) {
+    let img = image::GrayImage::from_fn(w, h, |x, y| {
+        let (fx, fy) = (x as f32, y as f32);
+        let v = 128.0
+            + 60.0 * (fx * 0.21).sin() * (fy * 0.17).cos()
+            + 40.0 * ((fx + 2.0 * fy) * 0.05).sin()
+            + 25.0 * ((fx * fx + fy * fy).sqrt() * 0.3).cos();
+        image::Luma([v.clamp(0.0, 255.0) as u8])
+    });
+    img.save(path).unwrap();
+}
+
+#[test]
+fn writes_colmap_text_features() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("img.png");
+    let out = dir.path().join("img.txt");
+    let (w, h) = (160u32, 120u32);
+    textured_png(&src, w, h);
+    let run = Command::new(env!("CARGO_BIN_EXE_phototraverse"))
+        .args([
+            "features",
+            src.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--max-keypoints",
+            "50",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        stdout.contains(" ms"),
+        "prints the extraction time: {stdout}"
+    );
+    let text = std::fs::read_to_string(&out).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<usize> = lines
+        .next()
+        .unwrap()
+        .split_whitespace()
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert_eq!(header.len(), 2);
+    assert_eq!(header[1], 128);
+    let n = header[0];
+    assert!(n > 5 && n <= 50, "{n} features");
+    let mut count = 0;
+    for line in lines {
+        let f: Vec<f64> = line
+            .split_whitespace()
+            .map(|v| v.parse().unwrap())
+            .collect();
+        assert_eq!(f.len(), 4 + 128);
+        // Corner convention: pixel centres at c + 0.5, so 0.5 <= x <= w - 0.5.
+        assert!(f[0] >= 0.5 && f[0] <= w as f64 - 0.5 && f[1] >= 0.5 && f[1] <= h as f64 - 0.5);
+        assert!(f[2] > 0.0);
+        assert!((0.0..std::f64::consts::TAU).contains(&f[3]));
+        assert!(f[4..]
+            .iter()
+            .all(|&d| d.fract() == 0.0 && (0.0..=255.0).contains(&d)));
+        assert!(f[4..].iter().any(|&d| d > 0.0));
+        count += 1;
+    }
+    assert_eq!(count, n);
+    // The same image gives the same file.
+    let out2 = dir.path().join("again.txt");
+    let run2 = Command::new(env!("CARGO_BIN_EXE_phototraverse"))
+        .args([
+            "features",
+            src.to_str().unwrap(),
+            "--out",
+            out2.to_str().unwrap(),
+            "--max-keypoints",
+            "50",
+        ])
+        .output()
+        .unwrap();
+    assert!(run2.status.success());
+    assert_eq!(text, std::fs::read_to_string(&out2).unwrap());
+}
+
+#[test]
+fn refuses_a_missing_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = Command::new(env!("CARGO_BIN_EXE_phototraverse"))
+        .args([
+            "features",
+            dir.path().join("none.png").to_str().unwrap(),
+            "--out",
+            dir.path().join("o.txt").to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(!run.status.success());
+    assert!(String::from_utf8_lossy(&run.stderr).contains("none.png"));
+}
