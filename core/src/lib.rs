@@ -18,3 +18,4 @@ pub mod image;
 pub mod matching;
 pub mod protocol;
 pub mod sift;
+pub mod traverse;

@@ -11,6 +11,7 @@
 pub mod firmware;
 pub mod link;
 pub mod processor;
+pub mod traverse_processor;
 
 pub use firmware::{Firmware, Limits, FIRMWARE_VERSION};
 pub use link::LinkBuffers;
@@ -18,3 +19,4 @@ pub use processor::{
     Clock, EpochInput, EpochOutput, EpochProcessor, ImageStatsFactory, NoClock, ProcessorFactory,
     SiftFactory,
 };
+pub use traverse_processor::{traverse_config, TraverseFactory, TraverseProcessor};

@@ -547,7 +547,11 @@ impl<T: Transport> Session<T> {
         Ok(())
     }
 
-    fn wait_for(&mut self, what: &str, done: impl Fn(&Self) -> bool) -> Result<(), SessionError> {
+    pub fn wait_for(
+        &mut self,
+        what: &str,
+        done: impl Fn(&Self) -> bool,
+    ) -> Result<(), SessionError> {
         let mut last_nudge = Instant::now();
         loop {
             if done(self) {

@@ -16,7 +16,8 @@ use crate::camera::{project, project_with_jacobians, Pose};
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
 /// An object point and its corrected photo-coordinates (mm) in the camera.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Correspondence {
     pub point: [f64; 3],
     pub xy: [f64; 2],

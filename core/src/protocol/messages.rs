@@ -657,6 +657,10 @@ pub mod status {
     pub const LOST: u8 = 3;
     /// The processor failed on this epoch (see the Error message).
     pub const FAILED: u8 = 4;
+    /// Oriented, but flagged (few tie points, chi-square test, lost continuity).
+    pub const FLAGGED: u8 = 5;
+    /// Not oriented from the images: the pose is the motion prediction.
+    pub const PREDICTED: u8 = 6;
 }
 
 /// Counts of an epoch.

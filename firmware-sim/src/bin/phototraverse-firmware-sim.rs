@@ -2,13 +2,21 @@
 //! (default), a TCP socket (`--tcp ADDR`, listening) or a serial device
 //! (`--serial DEV --baud N`).
 use phototraverse_firmware_sim::{
-    Clock, Firmware, ImageStatsFactory, Limits, LinkBuffers, SiftFactory,
+    Clock, Firmware, ImageStatsFactory, Limits, LinkBuffers, SiftFactory, TraverseFactory,
 };
+
+/// What the firmware runs on each epoch.
+#[derive(Clone, Copy)]
+enum Processor {
+    Traverse,
+    Sift,
+    Stats,
+}
 use std::io::{Read, Write};
 use std::time::Instant;
 
 const USAGE: &str = "usage: phototraverse-firmware-sim [--tcp ADDR | --serial DEV [--baud N]] \
-[--memory BYTES] [--max-width W] [--max-height H] [--processor sift|stats]";
+[--memory BYTES] [--max-width W] [--max-height H] [--processor traverse|sift|stats]";
 
 struct Options {
     tcp: Option<String>,
@@ -17,7 +25,7 @@ struct Options {
     memory: usize,
     limits: Limits,
     /// Image statistics instead of SIFT (bring-up).
-    stats_only: bool,
+    processor: Processor,
 }
 
 fn parse_args() -> Result<Options, String> {
@@ -27,7 +35,7 @@ fn parse_args() -> Result<Options, String> {
         baud: 921_600,
         memory: 32 << 20,
         limits: Limits::default(),
-        stats_only: false,
+        processor: Processor::Traverse,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -47,10 +55,15 @@ fn parse_args() -> Result<Options, String> {
                 o.limits.max_height = value()?.parse().map_err(|e| format!("--max-height: {e}"))?
             }
             "--processor" => {
-                o.stats_only = match value()?.as_str() {
-                    "sift" => false,
-                    "stats" => true,
-                    other => return Err(format!("--processor: unknown {other:?} (sift or stats)")),
+                o.processor = match value()?.as_str() {
+                    "traverse" => Processor::Traverse,
+                    "sift" => Processor::Sift,
+                    "stats" => Processor::Stats,
+                    other => {
+                        return Err(format!(
+                            "--processor: unknown {other:?} (traverse, sift or stats)"
+                        ))
+                    }
                 }
             }
             "-h" | "--help" => return Err(USAGE.to_string()),
@@ -110,10 +123,15 @@ fn serve<R: Read, W: Write>(o: &Options, rx: R, tx: W) -> std::io::Result<()> {
     let mut buffers = Box::new(LinkBuffers::new());
     let mut port = Port { rx, tx };
     let clock = StdClock(Instant::now());
-    if o.stats_only {
-        Firmware::new(&mut work, ImageStatsFactory, clock, o.limits).run(&mut port, &mut buffers)
-    } else {
-        Firmware::new(&mut work, SiftFactory, clock, o.limits).run(&mut port, &mut buffers)
+    match o.processor {
+        Processor::Traverse => {
+            Firmware::new(&mut work, TraverseFactory, clock, o.limits).run(&mut port, &mut buffers)
+        }
+        Processor::Sift => {
+            Firmware::new(&mut work, SiftFactory, clock, o.limits).run(&mut port, &mut buffers)
+        }
+        Processor::Stats => Firmware::new(&mut work, ImageStatsFactory, clock, o.limits)
+            .run(&mut port, &mut buffers),
     }
 }
 

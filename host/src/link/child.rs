@@ -33,6 +33,7 @@ pub fn firmware_binary() -> anyhow::Result<PathBuf> {
 /// Arguments passed to every spawned firmware.
 pub fn firmware_args(memory: usize, processor: super::FirmwareProcessor) -> Vec<String> {
     let p = match processor {
+        super::FirmwareProcessor::Traverse => "traverse",
         super::FirmwareProcessor::Sift => "sift",
         super::FirmwareProcessor::Stats => "stats",
     };

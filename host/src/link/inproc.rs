@@ -3,7 +3,7 @@
 use super::transport::Transport;
 use super::FirmwareProcessor;
 use phototraverse_firmware_sim::{
-    Clock, Firmware, ImageStatsFactory, Limits, LinkBuffers, SiftFactory,
+    Clock, Firmware, ImageStatsFactory, Limits, LinkBuffers, SiftFactory, TraverseFactory,
 };
 use std::io;
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
@@ -92,6 +92,10 @@ impl InProc {
                 let clock = StdClock(Instant::now());
                 // The loop ends at end of input; a port error means the host went away.
                 let _ = match processor {
+                    FirmwareProcessor::Traverse => {
+                        Firmware::new(&mut work, TraverseFactory, clock, limits)
+                            .run(&mut port, &mut buffers)
+                    }
                     FirmwareProcessor::Sift => Firmware::new(&mut work, SiftFactory, clock, limits)
                         .run(&mut port, &mut buffers),
                     FirmwareProcessor::Stats => {

@@ -52,8 +52,10 @@ impl std::str::FromStr for LinkKind {
 /// What the firmware runs on each epoch.
 #[derive(clap::ValueEnum, Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum FirmwareProcessor {
-    /// Reduced SIFT on both images.
+    /// The whole traverse: orientation of every epoch (what `run` needs).
     #[default]
+    Traverse,
+    /// Reduced SIFT on both images (feature counts and timings only).
     Sift,
     /// Image statistics only (link bring-up).
     Stats,
@@ -97,7 +99,7 @@ pub struct LinkOptions {
     #[arg(long, default_value_t = 32 << 20)]
     pub fw_memory: usize,
     /// Per-epoch processing of a firmware this link starts.
-    #[arg(long, value_enum, default_value_t = FirmwareProcessor::Sift)]
+    #[arg(long, value_enum, default_value_t = FirmwareProcessor::Traverse)]
     pub fw_processor: FirmwareProcessor,
     /// Frame payload bytes per chunk packet.
     #[arg(long, default_value_t = 1024)]
@@ -121,7 +123,7 @@ impl Default for LinkOptions {
             fault_reorder: 0.0,
             fault_seed: 1,
             fw_memory: 32 << 20,
-            fw_processor: FirmwareProcessor::Sift,
+            fw_processor: FirmwareProcessor::Traverse,
             chunk: 1024,
             link_timeout: 5.0,
         }

@@ -143,6 +143,8 @@ mod tests {
             chi2_passed: Some(false),
             observations: 400,
             tie_points: 100,
+            keypoints: [1000, 990],
+            stereo_matches: 500,
             stage_ms: Default::default(),
         };
         let report = RunReport {

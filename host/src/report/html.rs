@@ -342,6 +342,8 @@ mod tests {
                 chi2_passed: Some(true),
                 observations: 100,
                 tie_points: 25,
+                keypoints: [1000, 990],
+                stereo_matches: 500,
                 stage_ms: [("features".to_string(), 10.0), ("adjust".to_string(), 2.0)].into(),
             });
         }

@@ -84,6 +84,11 @@ pub struct EpochRecord {
     pub chi2_passed: Option<bool>,
     pub observations: usize,
     pub tie_points: usize,
+    /// Keypoints of the left and right image, and their stereo matches.
+    #[serde(default)]
+    pub keypoints: [u32; 2],
+    #[serde(default)]
+    pub stereo_matches: u32,
     /// Milliseconds per stage (features, matching, adjustment, link, ...).
     pub stage_ms: BTreeMap<String, f64>,
 }

@@ -1,0 +1,678 @@
+//! The traverse: the per-epoch state machine that joins the stages.
+//!
+//! Each epoch (one synchronised stereo pair): reduced SIFT on both images ->
+//! stereo and temporal matching (quad tie points, tracks) -> initial values
+//! (robust resection on tie points already in object space, else the
+//! constant-velocity prediction; new tie points by intersection from the
+//! previous, adjusted epoch) -> incremental bundle adjustment of the sliding
+//! window -> [`EpochOutput`].
+//!
+//! An epoch the images do not determine (few tie points, lost continuity) is
+//! still added to the window, tied to its motion prediction by a weighted
+//! prior, so the traverse goes on with continuity and the epoch is flagged.
+//! Frames that cannot be processed at all (wrong size) are rejected without
+//! touching the state: nothing computed before is lost.
+//!
+//! Memory: every buffer is carved from the arena at construction
+//! ([`TraverseConfig::budget`] predicts it); processing allocates nothing.
+
+pub mod config;
+pub mod motion;
+pub mod output;
+
+#[cfg(test)]
+mod tests;
+
+pub use config::TraverseConfig;
+pub use output::{flags, EpochOutput, EpochStatus, StageTimes};
+
+use crate::adjust::geometry::camera_pose;
+use crate::adjust::{
+    intersect, resect, AdjustError, Camera, Correspondence, Observation, Ray, Window,
+};
+use crate::budget::{Arena, OutOfMemory};
+use crate::camera::Pose;
+use crate::features::FeatureSet;
+use crate::image::ImageView;
+use crate::matching::{
+    relative_motion, EpochStatus as MatchStatus, Features, MatchError, Matcher, StereoFeatures,
+    TiePoint,
+};
+use crate::sift::{Sift, SiftError};
+use bytemuck::{Pod, Zeroable};
+use motion::predict;
+
+/// Microsecond time source for the per-stage timings (the DWT cycle counter on a
+/// Cortex-M, `Instant` on the host). [`NoClock`] reports zeros.
+pub trait Clock {
+    fn now_us(&self) -> u64;
+}
+
+/// A clock that always reads zero (timings off).
+pub struct NoClock;
+
+impl Clock for NoClock {
+    fn now_us(&self) -> u64 {
+        0
+    }
+}
+
+/// Which window point a track's tie point became.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Pod, Zeroable)]
+pub struct TrackPoint {
+    pub track_id: u32,
+    pub point: u32,
+}
+
+const NO_POINT: TrackPoint = TrackPoint {
+    track_id: u32::MAX,
+    point: u32::MAX,
+};
+
+/// Why the traverse could not be built.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TraverseError {
+    Sift(SiftError),
+    Match(MatchError),
+    Adjust(AdjustError),
+    OutOfMemory(OutOfMemory),
+    /// The configuration is inconsistent (the field is named).
+    Config(&'static str),
+}
+
+impl From<SiftError> for TraverseError {
+    fn from(e: SiftError) -> Self {
+        TraverseError::Sift(e)
+    }
+}
+impl From<MatchError> for TraverseError {
+    fn from(e: MatchError) -> Self {
+        TraverseError::Match(e)
+    }
+}
+impl From<AdjustError> for TraverseError {
+    fn from(e: AdjustError) -> Self {
+        TraverseError::Adjust(e)
+    }
+}
+impl From<OutOfMemory> for TraverseError {
+    fn from(e: OutOfMemory) -> Self {
+        TraverseError::OutOfMemory(e)
+    }
+}
+
+impl core::fmt::Display for TraverseError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            TraverseError::Sift(e) => write!(f, "feature extractor: {e:?}"),
+            TraverseError::Match(e) => write!(f, "matcher: {e:?}"),
+            TraverseError::Adjust(e) => write!(f, "adjustment: {e}"),
+            TraverseError::OutOfMemory(e) => write!(f, "{e}"),
+            TraverseError::Config(field) => write!(f, "inconsistent configuration: {field}"),
+        }
+    }
+}
+
+/// Auxiliary observations of an epoch, when the vehicle has them.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct AuxObservations {
+    /// Distance travelled since the previous epoch and its sigma, metres.
+    pub odometer: Option<(f64, f64)>,
+    /// Position of the left perspective centre (object frame) and its sigma, metres.
+    pub gnss: Option<([f64; 3], f64)>,
+}
+
+/// A left pose with its time, for the motion prediction.
+#[derive(Debug, Clone, Copy)]
+struct Stamped {
+    pose: Pose,
+    time: f64,
+}
+
+/// The traverse state over a sequence.
+pub struct Traverse<'a> {
+    cfg: TraverseConfig,
+    sift: Sift<'a>,
+    /// Feature sets `[buffer][camera]`; `features[cur]` holds the last accepted epoch.
+    features: [[FeatureSet<'a>; 2]; 2],
+    cur: usize,
+    matcher: Matcher<'a>,
+    window: Window<'a>,
+    track_points: &'a mut [TrackPoint],
+    corr: &'a mut [Correspondence],
+    /// Input epoch index of each window slot (oldest first).
+    window_inputs: &'a mut [u32],
+    epochs: u32,
+    have_prev: bool,
+    /// The last two adjusted (or predicted) epochs.
+    history: [Option<Stamped>; 2],
+    /// Window epoch id of the last accepted epoch.
+    prev_window_epoch: Option<u32>,
+}
+
+impl<'a> Traverse<'a> {
+    /// Builds every stage from `arena` (size it with [`TraverseConfig::budget`]).
+    pub fn new(cfg: TraverseConfig, arena: &mut Arena<'a>) -> Result<Self, TraverseError> {
+        check_config(&cfg)?;
+        let sift = Sift::new(cfg.sift, arena)?;
+        let n = cfg.features_per_image();
+        let features = [
+            [FeatureSet::new(arena, n)?, FeatureSet::new(arena, n)?],
+            [FeatureSet::new(arena, n)?, FeatureSet::new(arena, n)?],
+        ];
+        let matcher = Matcher::new(cfg.matching, arena)?;
+        let mut window = Window::new(cfg.adjust, &cfg.rig, arena)?;
+        window.set_base_length(cfg.rig.base_length());
+        let track_points = arena.alloc_slice::<TrackPoint>(cfg.matching.max_tracks)?;
+        track_points.fill(NO_POINT);
+        let corr = arena.alloc_slice::<Correspondence>(cfg.matching.max_tie_points)?;
+        let window_inputs = arena.alloc_slice::<u32>(cfg.adjust.window)?;
+        Ok(Traverse {
+            cfg,
+            sift,
+            features,
+            cur: 0,
+            matcher,
+            window,
+            track_points,
+            corr,
+            window_inputs,
+            epochs: 0,
+            have_prev: false,
+            history: [None, None],
+            prev_window_epoch: None,
+        })
+    }
+
+    pub fn config(&self) -> &TraverseConfig {
+        &self.cfg
+    }
+
+    /// Epochs given to [`Traverse::process`] so far.
+    pub fn epochs_seen(&self) -> u32 {
+        self.epochs
+    }
+
+    /// The window's epochs, oldest first: input epoch index, left pose and its
+    /// standard deviations from the last adjustment (refinements of earlier outputs).
+    pub fn window_epochs(&self) -> impl Iterator<Item = (u32, Pose, Option<[f64; 6]>)> + '_ {
+        (0..self.window.n_epochs()).filter_map(move |i| {
+            Some((
+                self.window_inputs[i],
+                self.window.epoch_pose(i)?,
+                self.window.epoch_std(i),
+            ))
+        })
+    }
+
+    /// The window's tie points with their standard deviations.
+    pub fn window_points(&self) -> impl Iterator<Item = (u32, [f64; 3], Option<[f64; 3]>)> + '_ {
+        self.track_points
+            .iter()
+            .filter(|t| t.point != u32::MAX)
+            .filter_map(move |t| {
+                Some((
+                    t.track_id,
+                    self.window.point(t.point)?,
+                    self.window.point_std(t.point),
+                ))
+            })
+    }
+
+    /// Right camera pose for a left pose, with the rig as last adjusted.
+    fn right_of(&self, left: &Pose) -> Pose {
+        camera_pose(left, &self.window.rig(), Camera::Right)
+    }
+
+    /// Processes one synchronised stereo pair taken at `time_s`.
+    pub fn process(
+        &mut self,
+        left: &ImageView,
+        right: &ImageView,
+        time_s: f64,
+        clock: &impl Clock,
+    ) -> EpochOutput {
+        self.process_with_aux(left, right, time_s, AuxObservations::default(), clock)
+    }
+
+    /// [`Traverse::process`] with odometer and GNSS observations of the epoch, which
+    /// enter the adjustment as weighted constraints (bridging a GNSS outage).
+    pub fn process_with_aux(
+        &mut self,
+        left: &ImageView,
+        right: &ImageView,
+        time_s: f64,
+        aux: AuxObservations,
+        clock: &impl Clock,
+    ) -> EpochOutput {
+        let t0 = clock.now_us();
+        let k = self.epochs;
+        self.epochs = self.epochs.wrapping_add(1);
+        let prediction = predict(&self.history, time_s).unwrap_or(self.cfg.datum);
+        let mut out = EpochOutput {
+            epoch: k,
+            left: prediction,
+            right: self.right_of(&prediction),
+            ..EpochOutput::default()
+        };
+
+        let fill = 1 - self.cur;
+        if !self.extract(fill, left, right, &mut out, clock) {
+            out.settle(false);
+            return self.finish(out, t0, clock);
+        }
+        let t1 = clock.now_us();
+
+        let report = match self.match_epoch(fill, left, right, &prediction) {
+            Ok(r) => r,
+            Err(_) => {
+                // The matcher refused the state (a programming error, not an input one):
+                // start over from this epoch rather than stop the traverse.
+                self.have_prev = false;
+                out.flags |= flags::LOST;
+                out.settle(false);
+                return self.finish(out, t0, clock);
+            }
+        };
+        let t2 = clock.now_us();
+        out.times.matching_us = elapsed(t1, t2);
+        out.stereo_matches = report.stereo.pass.matches;
+        out.tie_points = report.tie_points;
+        if report.status == MatchStatus::RepeatedFrame {
+            out.flags |= flags::REPEATED;
+            if let Some(last) = self.history[1] {
+                out.left = last.pose;
+                out.right = self.right_of(&last.pose);
+            }
+            out.settle(false);
+            return self.finish(out, t0, clock);
+        }
+        self.cur = fill;
+        self.have_prev = true;
+        out.flags |= match report.status {
+            MatchStatus::Lost => flags::LOST,
+            MatchStatus::NoKeypoints => flags::NO_FEATURES,
+            MatchStatus::NoStereoMatches => flags::NO_STEREO,
+            _ => 0,
+        };
+
+        let adjusted = self.adjust_epoch(k, (time_s, aux), &prediction, &mut out, clock, t2);
+        out.settle(adjusted);
+        self.history = [
+            self.history[1],
+            Some(Stamped {
+                pose: out.left,
+                time: time_s,
+            }),
+        ];
+        self.finish(out, t0, clock)
+    }
+
+    fn finish(&self, mut out: EpochOutput, t0: u64, clock: &impl Clock) -> EpochOutput {
+        out.times.total_us = elapsed(t0, clock.now_us());
+        out
+    }
+
+    /// Extracts both images into buffer `fill`; false (and flags) when an image is refused.
+    fn extract(
+        &mut self,
+        fill: usize,
+        left: &ImageView,
+        right: &ImageView,
+        out: &mut EpochOutput,
+        clock: &impl Clock,
+    ) -> bool {
+        let [fl, fr] = &mut self.features[fill];
+        fl.clear();
+        fr.clear();
+        // Both images must have the rig's format: the calibration is for that size.
+        let (w, h) = (
+            self.cfg.rig.left.width_px as usize,
+            self.cfg.rig.left.height_px as usize,
+        );
+        let sized = |v: &ImageView| v.width() == w && v.height() == h;
+        let t0 = clock.now_us();
+        let mut ok = sized(left) && sized(right) && self.sift.extract(left, fl).is_ok();
+        let t1 = clock.now_us();
+        ok = ok && self.sift.extract(right, fr).is_ok();
+        out.times.sift_left_us = elapsed(t0, t1);
+        out.times.sift_right_us = elapsed(t1, clock.now_us());
+        out.keypoints = [fl.len() as u32, fr.len() as u32];
+        if !ok {
+            out.flags |= flags::BAD_IMAGE;
+            // Leave the buffer empty: the previous epoch's features are in the other one.
+            fl.clear();
+            fr.clear();
+        }
+        ok
+    }
+
+    fn match_epoch(
+        &mut self,
+        fill: usize,
+        left: &ImageView,
+        right: &ImageView,
+        prediction: &Pose,
+    ) -> Result<crate::matching::EpochReport, MatchError> {
+        fn view<'k>(f: &'k FeatureSet) -> Features<'k> {
+            Features::new(f.keypoints(), f.descriptors())
+        }
+        let [cl, cr] = &self.features[fill];
+        let cur = StereoFeatures {
+            left: view(cl),
+            right: view(cr),
+        };
+        let prev = self.have_prev.then(|| {
+            let [pl, pr] = &self.features[1 - fill];
+            StereoFeatures {
+                left: view(pl),
+                right: view(pr),
+            }
+        });
+        // A motion guide needs a velocity: two epochs behind.
+        let motion = match self.history {
+            [Some(_), Some(last)] => Some(relative_motion(&last.pose, prediction)),
+            _ => None,
+        };
+        let images = Some((*left, *right));
+        self.matcher.process_epoch(
+            cur,
+            prev,
+            images,
+            motion.as_ref().map(|m| (&self.cfg.rig, m)),
+        )
+    }
+
+    /// Initial values, window update and adjustment; true when the epoch was adjusted.
+    fn adjust_epoch(
+        &mut self,
+        k: u32,
+        (time_s, aux): (f64, AuxObservations),
+        prediction: &Pose,
+        out: &mut EpochOutput,
+        clock: &impl Clock,
+        t_start: u64,
+    ) -> bool {
+        let first = self.window.n_epochs() == 0 && self.history[1].is_none();
+        let initial = if first {
+            self.cfg.datum
+        } else {
+            self.resect().unwrap_or_else(|| {
+                out.flags |= flags::NO_RESECTION;
+                *prediction
+            })
+        };
+        if self.window.n_epochs() >= self.cfg.adjust.window && self.slide().is_err() {
+            out.flags |= flags::SOLVE_FAILED;
+            return false;
+        }
+        let Ok(id) = self.window.add_epoch(&initial, time_s) else {
+            out.flags |= flags::SOLVE_FAILED;
+            return false;
+        };
+        self.window_inputs[self.window.n_epochs() - 1] = k;
+        // Invalid auxiliary values (NaN, sigma <= 0) are refused by the window and ignored.
+        if let Some((d, s)) = aux.odometer {
+            let _ = self.window.set_odometer(id, d, s);
+        }
+        if let Some((p, s)) = aux.gnss {
+            let _ = self.window.set_gnss(id, p, s);
+        }
+        if !first && (out.tie_points as usize) < self.cfg.min_tie_points {
+            out.flags |= flags::FEW_TIE_POINTS;
+            // Continuity from the motion prediction; errors here only mean a NaN pose.
+            let _ = self
+                .window
+                .set_pose_prior(id, prediction, self.cfg.prediction_sigmas);
+        }
+        out.new_points = self.add_tie_points(id);
+        let t3 = clock.now_us();
+        out.times.initial_us = elapsed(t_start, t3);
+        out.left = initial;
+        out.right = self.right_of(&initial);
+        let adjusted = first || self.solve(id, prediction, out);
+        out.times.adjust_us = elapsed(t3, clock.now_us());
+        self.prev_window_epoch = Some(id);
+        let (dp, dobs) = self.window.dropped();
+        if dp + dobs > 0 {
+            out.flags |= flags::CAPACITY;
+        }
+        out.observations = self.window.observations().len() as u32;
+        out.points = self.window_points().count() as u32;
+        adjusted
+    }
+
+    /// Drops the oldest window epoch (its pose is final) and keeps the slot map in step.
+    fn slide(&mut self) -> Result<Pose, AdjustError> {
+        let pose = self.window.slide()?;
+        let n = self.window.n_epochs();
+        self.window_inputs.copy_within(1..=n, 0);
+        Ok(pose)
+    }
+
+    /// Robust resection of the current left camera on tie points already in the window.
+    fn resect(&mut self) -> Option<Pose> {
+        let mut n = 0;
+        for tie in self.matcher.tie_points() {
+            if n >= self.corr.len() {
+                break;
+            }
+            let Some(point) = known_point(self.track_points, &tie) else {
+                continue;
+            };
+            let Some(xyz) = self.window.point(point) else {
+                continue;
+            };
+            let [c, r] = tie.cur.left;
+            let xy = self.cfg.rig.left.pixel_to_corrected(c as f64, r as f64);
+            self.corr[n] = Correspondence { point: xyz, xy };
+            n += 1;
+        }
+        let mut rcfg = self.cfg.resection;
+        rcfg.threshold_mm = 3.0 * self.cfg.sigma_px * self.cfg.rig.left.pixel_size_mm[0];
+        let r = resect(&self.corr[..n], self.cfg.rig.left.focal_mm, &rcfg).ok()?;
+        (r.inliers >= self.cfg.min_tie_points).then_some(r.pose)
+    }
+
+    /// Adds the epoch's tie points: observations of known points, new points by
+    /// intersection from the previous epoch. Returns the number of new points.
+    fn add_tie_points(&mut self, id: u32) -> u32 {
+        let Some(prev_id) = self.prev_window_epoch else {
+            return 0;
+        };
+        let Some(prev_slot) = self.window.n_epochs().checked_sub(2) else {
+            return 0;
+        };
+        let Some(prev_left) = self.window.epoch_pose(prev_slot) else {
+            return 0;
+        };
+        let prev = [prev_left, self.right_of(&prev_left)];
+        let mut new_points = 0;
+        for tie in self.matcher.tie_points() {
+            let point = match known_point(self.track_points, &tie) {
+                Some(p) => p,
+                None => {
+                    let at = (prev_id, &prev);
+                    let Some(p) = new_point(&self.cfg, &mut self.window, at, &tie) else {
+                        continue;
+                    };
+                    if let Some(e) = self.track_points.get_mut(tie.slot as usize) {
+                        *e = TrackPoint {
+                            track_id: tie.track_id,
+                            point: p,
+                        };
+                    }
+                    new_points += 1;
+                    p
+                }
+            };
+            for (cam, px) in [(Camera::Left, tie.cur.left), (Camera::Right, tie.cur.right)] {
+                let o = observation(&self.cfg, id, cam, point, px, tie.track_id);
+                let _ = self.window.add_observation(o);
+            }
+        }
+        new_points
+    }
+
+    /// Adjusts the window; on failure ties the new epoch to its prediction and tries once more.
+    fn solve(&mut self, id: u32, prediction: &Pose, out: &mut EpochOutput) -> bool {
+        let mut result = self.window.solve();
+        if result.is_err() {
+            out.flags |= flags::SOLVE_FAILED;
+            let _ = self
+                .window
+                .set_pose_prior(id, prediction, self.cfg.prediction_sigmas);
+            result = self.window.solve();
+        }
+        let Ok(rep) = result else { return false };
+        let last = self.window.n_epochs() - 1;
+        if let Some(pose) = self.window.epoch_pose(last) {
+            out.left = pose;
+            out.right = self.right_of(&pose);
+        }
+        out.std = self.window.epoch_std(last);
+        out.sigma0 = rep.sigma0;
+        out.chi2_passed = rep.chi2.passed;
+        out.redundancy = rep.redundancy as u32;
+        out.iterations = rep.iterations as u32;
+        out.flagged_observations = rep.flagged as u32;
+        out.rms_px = self.rms_px();
+        // Only the upper tail flags: sigma0 above its bound means blunders or a model
+        // error; below it, the a-priori sigma was merely pessimistic.
+        if rep.chi2.statistic > rep.chi2.upper {
+            out.flags |= flags::CHI2;
+        }
+        true
+    }
+
+    /// RMS image residual of the window's unflagged observations, pixels.
+    fn rms_px(&self) -> f64 {
+        let px = self.cfg.rig.left.pixel_size_mm;
+        let (mut sum, mut n) = (0.0, 0usize);
+        for (i, o) in self.window.observations().iter().enumerate() {
+            if o.is_flagged() {
+                continue;
+            }
+            if let Some([vx, vy]) = self.window.residual(i) {
+                sum += (vx / px[0]) * (vx / px[0]) + (vy / px[1]) * (vy / px[1]);
+                n += 1;
+            }
+        }
+        if n == 0 {
+            0.0
+        } else {
+            libm::sqrt(sum / n as f64)
+        }
+    }
+}
+
+/// The window point of a tie point's track, if the track already has one.
+fn known_point(map: &[TrackPoint], tie: &TiePoint) -> Option<u32> {
+    let e = map.get(tie.slot as usize)?;
+    (e.track_id == tie.track_id && e.point != u32::MAX).then_some(e.point)
+}
+
+/// An image observation of `point` at pixel `px`, weighted by the configured sigma.
+fn observation(
+    cfg: &TraverseConfig,
+    epoch: u32,
+    camera: Camera,
+    point: u32,
+    px: [f32; 2],
+    tag: u32,
+) -> Observation {
+    let interior = match camera {
+        Camera::Left => &cfg.rig.left,
+        Camera::Right => &cfg.rig.right,
+    };
+    let xy = interior.pixel_to_corrected(px[0] as f64, px[1] as f64);
+    let s = cfg.sigma_px;
+    let [sx, sy] = interior.pixel_size_mm;
+    let weight = [1.0 / (s * sx * s * sx), 1.0 / (s * sy * s * sy)];
+    let mut o = Observation::new(epoch, camera, point, xy, weight);
+    o.tag = tag;
+    o
+}
+
+/// Intersects a new tie point from the previous epoch's stereo pair (`at`: its window
+/// epoch id and its left and right poses) and adds it with its two observations there.
+fn new_point(
+    cfg: &TraverseConfig,
+    window: &mut Window,
+    at: (u32, &[Pose; 2]),
+    tie: &TiePoint,
+) -> Option<u32> {
+    let (prev_id, [left, right]) = at;
+    let rig = &cfg.rig;
+    let xl = rig
+        .left
+        .pixel_to_corrected(tie.prev.left[0] as f64, tie.prev.left[1] as f64);
+    let xr = rig
+        .right
+        .pixel_to_corrected(tie.prev.right[0] as f64, tie.prev.right[1] as f64);
+    let rays = [
+        Ray {
+            pose: *left,
+            focal_mm: rig.left.focal_mm,
+            xy: xl,
+        },
+        Ray {
+            pose: *right,
+            focal_mm: rig.right.focal_mm,
+            xy: xr,
+        },
+    ];
+    let x = intersect(&rays, cfg.min_ray_angle_rad).ok()?;
+    let depth = -left.to_camera(&x.point)[2];
+    if !(depth > 0.0 && depth <= cfg.max_depth_m) {
+        return None;
+    }
+    let point = window.add_point(x.point).ok()?;
+    for (cam, px) in [
+        (Camera::Left, tie.prev.left),
+        (Camera::Right, tie.prev.right),
+    ] {
+        let _ = window.add_observation(observation(cfg, prev_id, cam, point, px, tie.track_id));
+    }
+    Some(point)
+}
+
+fn elapsed(a: u64, b: u64) -> u32 {
+    b.saturating_sub(a).min(u32::MAX as u64) as u32
+}
+
+/// True for a finite, strictly positive value (false for NaN).
+fn positive(v: f64) -> bool {
+    v > 0.0 && v.is_finite()
+}
+
+fn check_config(cfg: &TraverseConfig) -> Result<(), TraverseError> {
+    let m = &cfg.matching;
+    if m.image_width as usize != cfg.sift.max_width
+        || m.image_height as usize != cfg.sift.max_height
+    {
+        return Err(TraverseError::Config(
+            "matching image size differs from the extractor's",
+        ));
+    }
+    if cfg.rig.left.width_px as usize != cfg.sift.max_width
+        || cfg.rig.left.height_px as usize != cfg.sift.max_height
+    {
+        return Err(TraverseError::Config(
+            "rig image size differs from the extractor's",
+        ));
+    }
+    if cfg.adjust.window < 2 {
+        return Err(TraverseError::Config("adjust.window must be at least 2"));
+    }
+    if !positive(cfg.sigma_px) || !positive(cfg.max_depth_m) {
+        return Err(TraverseError::Config(
+            "sigma_px and max_depth_m must be positive",
+        ));
+    }
+    if !cfg.prediction_sigmas.iter().all(|s| positive(*s)) {
+        return Err(TraverseError::Config("prediction_sigmas must be positive"));
+    }
+    Ok(())
+}

@@ -1,0 +1,126 @@
+//! What the traverse reports for each epoch.
+use crate::camera::Pose;
+
+/// Reasons an epoch is flagged (bit set in [`EpochOutput::flags`]).
+pub mod flags {
+    /// Fewer tie points than `min_tie_points`: the epoch leans on its prediction.
+    pub const FEW_TIE_POINTS: u32 = 1 << 0;
+    /// The matcher lost continuity (a frame from another place, a large jump).
+    pub const LOST: u32 = 1 << 1;
+    /// An image has no usable keypoints (textureless, dark, saturated).
+    pub const NO_FEATURES: u32 = 1 << 2;
+    /// No stereo match at this epoch.
+    pub const NO_STEREO: u32 = 1 << 3;
+    /// The frames repeat the previous epoch's: the previous pose is repeated.
+    pub const REPEATED: u32 = 1 << 4;
+    /// The global chi-square test of the adjustment failed.
+    pub const CHI2: u32 = 1 << 5;
+    /// The adjustment failed (singular, no redundancy): the pose is the initial value.
+    pub const SOLVE_FAILED: u32 = 1 << 6;
+    /// The image buffer was refused (size, capacity): the epoch was skipped.
+    pub const BAD_IMAGE: u32 = 1 << 7;
+    /// A capacity was reached (points or observations dropped).
+    pub const CAPACITY: u32 = 1 << 8;
+    /// Informational: the resection failed and the motion prediction started the adjustment.
+    pub const NO_RESECTION: u32 = 1 << 9;
+
+    /// Flags that make an epoch count as flagged (the informational ones do not).
+    pub const FLAGGING: u32 = FEW_TIE_POINTS
+        | LOST
+        | NO_FEATURES
+        | NO_STEREO
+        | REPEATED
+        | CHI2
+        | SOLVE_FAILED
+        | BAD_IMAGE;
+}
+
+/// How an epoch's pose was obtained.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(u8)]
+pub enum EpochStatus {
+    /// Adjusted, every check passed.
+    #[default]
+    Ok = 0,
+    /// Adjusted, but flagged (see the flags).
+    Flagged = 1,
+    /// Not adjusted: the pose is the motion prediction.
+    Predicted = 2,
+    /// The frames were refused; the pose is the prediction and the state is unchanged.
+    Rejected = 3,
+}
+
+impl EpochStatus {
+    pub fn from_u8(v: u8) -> Option<Self> {
+        match v {
+            0 => Some(EpochStatus::Ok),
+            1 => Some(EpochStatus::Flagged),
+            2 => Some(EpochStatus::Predicted),
+            3 => Some(EpochStatus::Rejected),
+            _ => None,
+        }
+    }
+}
+
+/// Microseconds per stage of one epoch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StageTimes {
+    pub sift_left_us: u32,
+    pub sift_right_us: u32,
+    /// Stereo and temporal matching, quads and tracks.
+    pub matching_us: u32,
+    pub initial_us: u32,
+    pub adjust_us: u32,
+    pub total_us: u32,
+}
+
+/// The result of one epoch.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct EpochOutput {
+    /// Input epoch index (0-based, counting every epoch given to the traverse).
+    pub epoch: u32,
+    pub status: EpochStatus,
+    /// Bits of [`flags`].
+    pub flags: u32,
+    /// Left and right camera poses, object frame.
+    pub left: Pose,
+    pub right: Pose,
+    /// Standard deviations of the left pose (omega, phi, kappa rad; X, Y, Z m).
+    pub std: Option<[f64; 6]>,
+    /// A-posteriori sigma0 of the window adjustment (0 when not adjusted).
+    pub sigma0: f64,
+    pub chi2_passed: bool,
+    /// Redundancy of the window adjustment.
+    pub redundancy: u32,
+    /// Keypoints of the left and right image.
+    pub keypoints: [u32; 2],
+    pub stereo_matches: u32,
+    /// Tie points (quads) linking this epoch to the previous one.
+    pub tie_points: u32,
+    /// New tie points added to the window at this epoch.
+    pub new_points: u32,
+    /// Image observations and tie points in the window after this epoch.
+    pub observations: u32,
+    pub points: u32,
+    /// Observations flagged as blunders in the last adjustment.
+    pub flagged_observations: u32,
+    /// RMS image residual of the window, pixels.
+    pub rms_px: f64,
+    pub iterations: u32,
+    pub times: StageTimes,
+}
+
+impl EpochOutput {
+    /// Sets the status from the flags and whether the epoch was adjusted.
+    pub(crate) fn settle(&mut self, adjusted: bool) {
+        self.status = if self.flags & flags::BAD_IMAGE != 0 {
+            EpochStatus::Rejected
+        } else if !adjusted {
+            EpochStatus::Predicted
+        } else if self.flags & flags::FLAGGING != 0 {
+            EpochStatus::Flagged
+        } else {
+            EpochStatus::Ok
+        };
+    }
+}

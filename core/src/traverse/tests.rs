@@ -1,0 +1,193 @@
+//! Traverse tests on a small scene the test renders itself: a textured wall and
+//! ground seen by a rectified rig moving forward with known poses.
+extern crate std;
+use super::*;
+use crate::budget::MemoryBudget;
+use crate::camera::{Interior, Rig};
+use std::vec;
+use std::vec::Vec;
+
+const W: u32 = 320;
+const H: u32 = 240;
+
+fn hash(ix: i64, iy: i64, seed: u64) -> f64 {
+    let mut h = (ix as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (iy as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+        ^ seed.wrapping_mul(0x1656_67B1_9E37_79F9);
+    h ^= h >> 29;
+    h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    h ^= h >> 32;
+    (h >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// Multi-octave value noise in [0, 1]: texture that SIFT can hold on to at every scale.
+fn texture(u: f64, v: f64) -> f64 {
+    let mut sum = 0.0;
+    let mut amp = 0.5;
+    let mut freq = 2.0;
+    for o in 0..5 {
+        let (x, y) = (u * freq, v * freq);
+        let (ix, iy) = (libm::floor(x) as i64, libm::floor(y) as i64);
+        let (fx, fy) = (x - ix as f64, y - iy as f64);
+        let s = |t: f64| t * t * (3.0 - 2.0 * t);
+        let (sx, sy) = (s(fx), s(fy));
+        let a = hash(ix, iy, o) * (1.0 - sx) + hash(ix + 1, iy, o) * sx;
+        let b = hash(ix, iy + 1, o) * (1.0 - sx) + hash(ix + 1, iy + 1, o) * sx;
+        sum += amp * (a * (1.0 - sy) + b * sy);
+        amp *= 0.5;
+        freq *= 2.1;
+    }
+    sum / 0.97
+}
+
+/// Renders the scene (wall at Y = 14 m, ground at Z = -1.6 m) from `pose`.
+fn render(cam: &Interior, pose: &Pose) -> Vec<u8> {
+    let mt = pose.rotation().transpose();
+    let c = pose.centre_vec();
+    let mut img = vec![0u8; (W * H) as usize];
+    for r in 0..H {
+        for col in 0..W {
+            let [xc, yc] = cam.pixel_to_corrected(col as f64, r as f64);
+            let d = mt * nalgebra::Vector3::new(xc, yc, -cam.focal_mm);
+            let mut best = f64::INFINITY;
+            let mut val = 0.5;
+            if d[1] > 1e-9 {
+                let t = (14.0 - c[1]) / d[1];
+                let p = c + d * t;
+                best = t;
+                val = texture(p[0] * 0.7, p[2] * 0.7);
+            }
+            if d[2] < -1e-9 {
+                let t = (-1.6 - c[2]) / d[2];
+                if t < best {
+                    let p = c + d * t;
+                    val = 0.3 + 0.7 * texture(p[0] * 0.9 + 100.0, p[1] * 0.9);
+                }
+            }
+            img[(r * W + col) as usize] = (val * 255.0).clamp(0.0, 255.0) as u8;
+        }
+    }
+    img
+}
+
+fn rig() -> Rig {
+    Rig::rectified(Interior::pinhole_px(W, H, 300.0), 0.5)
+}
+
+fn config() -> TraverseConfig {
+    let mut cfg = TraverseConfig::for_rig(rig(), Pose::from_degrees(90.0, 0.0, 0.0, [0.0; 3]));
+    cfg.sift.max_keypoints = 500;
+    cfg.matching.max_keypoints = 500;
+    cfg.adjust.window = 4;
+    cfg.matching.track_history = 4;
+    cfg
+}
+
+fn truth(k: usize) -> Pose {
+    // Forward 0.4 m per epoch with a slight drift to the right and a small yaw.
+    Pose::from_degrees(
+        90.0,
+        0.0,
+        0.3 * k as f64,
+        [0.02 * k as f64, 0.4 * k as f64, 0.0],
+    )
+}
+
+struct Storage(Vec<u8>);
+
+fn storage(cfg: &TraverseConfig) -> (Storage, MemoryBudget) {
+    let mut budget = MemoryBudget::new();
+    cfg.budget(&mut budget).unwrap();
+    (Storage(vec![0u8; budget.total()]), budget)
+}
+
+#[test]
+fn budget_predicts_what_the_traverse_carves() {
+    let cfg = config();
+    let (mut st, budget) = storage(&cfg);
+    let mut arena = Arena::new(&mut st.0);
+    let _t = Traverse::new(cfg, &mut arena).unwrap();
+    let used = arena.used();
+
+    assert!(used <= budget.total(), "{used} > {}", budget.total());
+    // Only alignment padding separates the prediction from the measurement.
+    assert!(budget.total() - used < 64 * budget.components().len());
+}
+
+#[test]
+fn too_small_an_arena_is_an_error_not_a_panic() {
+    let cfg = config();
+    let mut small = vec![0u8; 10_000];
+    let mut arena = Arena::new(&mut small);
+    assert!(matches!(
+        Traverse::new(cfg, &mut arena),
+        Err(TraverseError::OutOfMemory(_)) | Err(TraverseError::Sift(_))
+    ));
+}
+
+#[test]
+fn follows_a_known_motion_and_survives_a_bad_frame() {
+    let cfg = config();
+    let (mut st, _) = storage(&cfg);
+    let mut arena = Arena::new(&mut st.0);
+    let mut t = Traverse::new(cfg, &mut arena).unwrap();
+    let rig = rig();
+    let mut outputs = Vec::new();
+    for k in 0..7 {
+        let left = truth(k);
+        let right = rig.right_pose(&left);
+        let (li, ri) = (render(&rig.left, &left), render(&rig.right, &right));
+        if k == 4 {
+            // A frame of the wrong size: rejected, the state stays as it was.
+            let bad = vec![0u8; 10 * 10];
+            let v = ImageView::new(&bad, 10, 10).unwrap();
+            let out = t.process(&v, &v, k as f64 - 0.5, &NoClock);
+            assert_eq!(out.status, EpochStatus::Rejected);
+            assert_ne!(out.flags & flags::BAD_IMAGE, 0);
+        }
+        let lv = ImageView::new(&li, W as usize, H as usize).unwrap();
+        let rv = ImageView::new(&ri, W as usize, H as usize).unwrap();
+        outputs.push((k, t.process(&lv, &rv, k as f64, &NoClock)));
+    }
+    for (k, out) in &outputs {
+        let want = truth(*k);
+        let err = (out.left.centre_vec() - want.centre_vec()).norm();
+        let rot = (out.left.rotation() * want.rotation().transpose()
+            - nalgebra::Matrix3::identity())
+        .norm();
+        assert!(err < 0.03, "epoch {k}: position error {err} m, {out:?}");
+        assert!(rot < 2e-3, "epoch {k}: rotation error {rot}");
+        if *k > 0 {
+            assert_eq!(out.status, EpochStatus::Ok, "epoch {k}: {out:?}");
+            assert!(
+                out.tie_points >= 20,
+                "epoch {k}: {} tie points",
+                out.tie_points
+            );
+            assert!(out.std.is_some());
+        }
+    }
+    // The right camera follows the rig.
+    let last = outputs.last().unwrap().1;
+    let b = last.left.rotation() * (last.right.centre_vec() - last.left.centre_vec());
+    assert!((b[0] - 0.5).abs() < 1e-9);
+}
+
+#[test]
+fn prediction_continues_constant_velocity() {
+    let a = Stamped {
+        pose: truth(0),
+        time: 0.0,
+    };
+    let b = Stamped {
+        pose: truth(1),
+        time: 1.0,
+    };
+    let p = motion::predict(&[Some(a), Some(b)], 2.0).unwrap();
+    let want = truth(2);
+    // The yaw turns the displacement too, so allow the small difference of that turn.
+    assert!((p.centre_vec() - want.centre_vec()).norm() < 5e-3);
+    assert!((p.kappa - want.kappa).abs() < 1e-9);
+    assert_eq!(motion::predict(&[None, Some(b)], 2.0).unwrap(), b.pose);
+    assert!(motion::predict(&[None, None], 2.0).is_none());
+}

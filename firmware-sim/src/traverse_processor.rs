@@ -1,0 +1,153 @@
+//! The traverse behind the protocol loop: maps a `Configure` message to a
+//! [`TraverseConfig`], carves the traverse from the firmware's arena and answers
+//! every epoch with its orientation, precision, counts and stage timings.
+use crate::processor::{
+    BuildError, Clock, EpochInput, EpochOutput, EpochProcessor, ProcessorFactory,
+};
+use phototraverse_core::budget::{Arena, MemoryBudget};
+use phototraverse_core::camera::Pose;
+use phototraverse_core::matching::StereoGeometry;
+use phototraverse_core::protocol::messages::{
+    processor_kind, stage, status, Configure, EpochResult, AUX_GNSS, AUX_ODOMETER,
+};
+use phototraverse_core::traverse::{
+    self, flags, AuxObservations, EpochStatus, Traverse, TraverseConfig, TraverseError,
+};
+
+/// Builds the traverse for a configuration.
+pub struct TraverseFactory;
+
+/// The traverse as an [`EpochProcessor`].
+pub struct TraverseProcessor<'a> {
+    traverse: Traverse<'a>,
+}
+
+/// The traverse configuration a `Configure` message asks for.
+pub fn traverse_config(c: &Configure) -> Result<TraverseConfig, BuildError> {
+    let rig = c.rig;
+    rig.validate()
+        .map_err(|_| BuildError::Invalid("rig: focal, format or values"))?;
+    if rig.left.width_px != rig.right.width_px || rig.left.height_px != rig.right.height_px {
+        return Err(BuildError::Invalid(
+            "rig: left and right image sizes differ",
+        ));
+    }
+    if rig.base_length() <= 0.0 {
+        return Err(BuildError::Invalid("rig: zero base"));
+    }
+    let p = &c.pipeline;
+    let datum = Pose::from_degrees(90.0, 0.0, 0.0, [0.0; 3]);
+    let mut cfg = TraverseConfig::for_rig(rig, datum);
+    let n = p.keypoints_per_image.clamp(1, 100_000) as usize;
+    cfg.sift.max_keypoints = n;
+    cfg.matching.max_keypoints = n;
+    cfg.sift.octaves = p.octaves.max(1) as usize;
+    cfg.sift.levels = p.scales_per_octave.max(1) as usize;
+    cfg.sift.contrast_threshold = p.contrast_threshold;
+    cfg.sift.edge_threshold = p.edge_ratio;
+    cfg.matching.ratio = p.match_ratio;
+    if let StereoGeometry::Rectified {
+        max_disparity_px, ..
+    } = &mut cfg.matching.stereo
+    {
+        *max_disparity_px = p.max_disparity_px;
+    }
+    let window = (p.window_len as usize).max(2);
+    cfg.adjust.window = window;
+    cfg.matching.track_history = window;
+    cfg.matching.max_tracks = (p.track_capacity as usize).max(1);
+    Ok(cfg)
+}
+
+fn build_error(e: TraverseError) -> BuildError {
+    match e {
+        TraverseError::OutOfMemory(m) => BuildError::OutOfMemory(m),
+        TraverseError::Config(what) => BuildError::Invalid(what),
+        TraverseError::Sift(_) => BuildError::Invalid("feature extractor configuration"),
+        TraverseError::Match(_) => BuildError::Invalid("matcher configuration"),
+        TraverseError::Adjust(_) => BuildError::Invalid("adjustment configuration"),
+    }
+}
+
+impl ProcessorFactory for TraverseFactory {
+    type Processor<'a> = TraverseProcessor<'a>;
+    const KIND: u8 = processor_kind::TRAVERSE;
+
+    fn budget(&self, config: &Configure, budget: &mut MemoryBudget) -> Result<(), BuildError> {
+        traverse_config(config)?
+            .budget(budget)
+            .map_err(|_| BuildError::Invalid("feature extractor configuration"))
+    }
+
+    fn build<'a>(
+        &mut self,
+        config: &Configure,
+        arena: &mut Arena<'a>,
+    ) -> Result<TraverseProcessor<'a>, BuildError> {
+        let cfg = traverse_config(config)?;
+        let traverse = Traverse::new(cfg, arena).map_err(build_error)?;
+        Ok(TraverseProcessor { traverse })
+    }
+}
+
+/// The firmware's clock seen through the core's clock trait.
+struct ClockRef<'c>(&'c dyn Clock);
+
+impl traverse::Clock for ClockRef<'_> {
+    fn now_us(&self) -> u64 {
+        self.0.now_us()
+    }
+}
+
+fn aux_of(input: &EpochInput) -> AuxObservations {
+    let Some(a) = input.aux else {
+        return AuxObservations::default();
+    };
+    let sigma = (a.gnss_sigma_m[0] + a.gnss_sigma_m[1] + a.gnss_sigma_m[2]) / 3.0;
+    AuxObservations {
+        odometer: (a.flags & AUX_ODOMETER != 0).then_some((a.odometer_m, a.odometer_sigma_m)),
+        gnss: (a.flags & AUX_GNSS != 0).then_some((a.gnss_m, sigma)),
+    }
+}
+
+impl EpochProcessor for TraverseProcessor<'_> {
+    fn process(&mut self, input: &EpochInput, clock: &dyn Clock) -> EpochOutput {
+        let time_s = input.timestamps_us[0] as f64 * 1e-6;
+        let out = self.traverse.process_with_aux(
+            &input.left,
+            &input.right,
+            time_s,
+            aux_of(input),
+            &ClockRef(clock),
+        );
+        let code = match out.status {
+            EpochStatus::Ok => status::OK,
+            EpochStatus::Flagged => status::FLAGGED,
+            EpochStatus::Predicted => status::PREDICTED,
+            EpochStatus::Rejected => status::FAILED,
+        };
+        let mut result = EpochResult::empty(input.epoch, code);
+        result.pose = out.left.to_params();
+        result.sigma = out.std.unwrap_or([0.0; 6]);
+        result.sigma0 = out.sigma0;
+        result.counts.keypoints = out.keypoints;
+        result.counts.stereo_matches = out.stereo_matches;
+        result.counts.temporal_matches = out.tie_points;
+        result.counts.tie_points = out.points;
+        result.counts.observations = out.observations;
+        result.counts.dropped = (out.flags & flags::CAPACITY != 0) as u32;
+        result.extra = [
+            out.flags as f64,
+            out.rms_px,
+            out.new_points as f64,
+            out.redundancy as f64,
+        ];
+        let mut timings_us = [0u32; stage::COUNT];
+        timings_us[stage::SIFT_LEFT] = out.times.sift_left_us;
+        timings_us[stage::SIFT_RIGHT] = out.times.sift_right_us;
+        timings_us[stage::STEREO_MATCH] = out.times.matching_us;
+        timings_us[stage::INITIAL_VALUES] = out.times.initial_us;
+        timings_us[stage::ADJUST] = out.times.adjust_us;
+        EpochOutput { result, timings_us }
+    }
+}

@@ -1,0 +1,382 @@
+//! `phototraverse run`: a dataset streamed through the emulated rig link to the
+//! firmware, which runs the core traverse; the answers become `poses.txt`,
+//! `eop.csv`, `report.json` and `report.html` in the output directory.
+//!
+//! `poses.txt` is written line by line as results arrive, so whatever stops a
+//! run (a corrupt image is skipped, a dead firmware ends it) leaves the poses of
+//! the epochs processed so far on disk.
+use crate::dataset::Dataset;
+use crate::eval::{evaluate, Evaluation};
+use crate::link::LinkOptions;
+use crate::pipeline::PipelineSettings;
+use crate::poses::{format_pose, KittiPose};
+use crate::report::{
+    write_eop_csv, write_html, CameraEop, EpochRecord, EpochStatus, MemoryLine, RunReport,
+};
+use crate::session::{EpochFrames, Session, SessionOptions};
+use anyhow::{Context, Result};
+use phototraverse_core::budget::{ComponentKind, MemoryBudget};
+use phototraverse_core::camera::{kitti_from_pose, pose_from_kitti, Pose};
+use phototraverse_core::protocol::messages::{
+    stage, status, ConfigAccepted, EpochResult, PixelFormat,
+};
+use phototraverse_core::traverse::flags;
+use phototraverse_core::traverse::motion::constant_velocity;
+use std::io::Write;
+use std::path::Path;
+
+/// How to run.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    pub link: LinkOptions,
+    pub settings: PipelineSettings,
+    /// Process only the first epochs.
+    pub max_epochs: Option<usize>,
+    /// Draw a progress bar (on a terminal).
+    pub progress: bool,
+}
+
+/// What a run produced.
+#[derive(Debug, Clone)]
+pub struct RunOutcome {
+    pub report: RunReport,
+    pub evaluation: Option<Evaluation>,
+    /// Median firmware processing time per epoch, milliseconds.
+    pub median_epoch_ms: f64,
+    /// Epochs whose images could not be read (skipped, pose predicted).
+    pub unreadable: Vec<usize>,
+}
+
+/// Runs `ds` into `out` (created if needed).
+pub fn run_dataset(ds: &Dataset, out: &Path, opts: &RunOptions) -> Result<RunOutcome> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let configure = opts.settings.configure(&ds.rig);
+    let transport = opts
+        .link
+        .open()
+        .context("cannot open the link to the firmware")?;
+    let mut session = Session::open(transport, SessionOptions::from_link(&opts.link))
+        .context("the firmware did not answer the hello")?;
+    let accepted = session.configure(&configure)?;
+    let mut run = Run::new(ds, out, opts, accepted)?;
+    let n = opts.max_epochs.map_or(ds.len(), |m| m.min(ds.len()));
+    let bar = progress_bar(n as u64, opts.progress);
+    let mut failure = None;
+    for i in 0..n {
+        if let Err(e) = run.epoch(&mut session, i) {
+            failure = Some(e.context(format!("epoch {i} ({})", ds.epochs[i].name)));
+            break;
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    if failure.is_none() {
+        if let Err(e) = session.finish() {
+            failure = Some(anyhow::Error::new(e).context("waiting for the last results"));
+        }
+    }
+    run.report.link = serde_json::to_value(session.link_stats()).ok();
+    let outcome = run.finish(&session)?;
+    match failure {
+        Some(e) => Err(e.context(format!(
+            "run stopped; the poses of the {} epochs processed are in {}",
+            outcome.report.epochs.len(),
+            out.join("poses.txt").display()
+        ))),
+        None => Ok(outcome),
+    }
+}
+
+fn progress_bar(n: u64, show: bool) -> indicatif::ProgressBar {
+    use std::io::IsTerminal;
+    if !show || !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(n);
+    if let Ok(style) = indicatif::ProgressStyle::with_template(
+        "{spinner} epoch {pos}/{len} [{bar:40}] {per_sec} eta {eta}",
+    ) {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar
+}
+
+/// State of one run.
+struct Run<'d> {
+    ds: &'d Dataset,
+    out: &'d Path,
+    poses_file: std::io::BufWriter<std::fs::File>,
+    report: RunReport,
+    kitti: Vec<KittiPose>,
+    epoch_ms: Vec<f64>,
+    unreadable: Vec<usize>,
+    accepted: ConfigAccepted,
+    settings: PipelineSettings,
+}
+
+impl<'d> Run<'d> {
+    fn new(
+        ds: &'d Dataset,
+        out: &'d Path,
+        opts: &RunOptions,
+        accepted: ConfigAccepted,
+    ) -> Result<Self> {
+        let path = out.join("poses.txt");
+        let file = std::fs::File::create(&path)
+            .with_context(|| format!("cannot create {}", path.display()))?;
+        let report = RunReport {
+            dataset: ds.dir.display().to_string(),
+            mode: "window".into(),
+            image_width: ds.rig.left.width_px,
+            image_height: ds.rig.left.height_px,
+            ..Default::default()
+        };
+        Ok(Run {
+            ds,
+            out,
+            poses_file: std::io::BufWriter::new(file),
+            report,
+            kitti: Vec::new(),
+            epoch_ms: Vec::new(),
+            unreadable: Vec::new(),
+            accepted,
+            settings: opts.settings,
+        })
+    }
+
+    fn time_of(&self, i: usize) -> f64 {
+        // Without times.txt an epoch is one second: the prediction only needs ratios.
+        self.ds.epochs[i].time.unwrap_or(i as f64)
+    }
+
+    /// Sends epoch `i`, waits for its result and records it.
+    fn epoch<T: crate::link::Transport>(
+        &mut self,
+        session: &mut Session<T>,
+        i: usize,
+    ) -> Result<()> {
+        let time = self.time_of(i);
+        let record = match self.ds.load_pair(i) {
+            Ok((left, right)) => {
+                let frames = EpochFrames {
+                    epoch: i as u32,
+                    timestamp_us: (time * 1e6).max(0.0) as u64,
+                    width: left.width as u16,
+                    height: left.height as u16,
+                    format: PixelFormat::Gray8,
+                    left: &left.data,
+                    right: &right.data,
+                    aux: None,
+                };
+                session.send_epoch(&frames)?;
+                let e = i as u32;
+                // Statistics follow the result of every epoch the firmware processed.
+                session.wait_for("the epoch's result", |s| {
+                    s.result(e).is_some_and(|r| {
+                        s.stats(e).is_some() || matches!(r.status, status::LOST | status::FAILED)
+                    })
+                })?;
+                let result = *session.result(e).context("result vanished")?;
+                if let Some(st) = session.stats(e) {
+                    self.epoch_ms
+                        .push(st.timings_us[stage::TOTAL] as f64 / 1000.0);
+                }
+                self.record(i, time, &result, session.stats(e).map(|s| s.timings_us))
+            }
+            Err(err) => {
+                eprintln!("phototraverse: warning: epoch {i}: {err}; its pose is predicted");
+                self.unreadable.push(i);
+                self.predicted(i, time, format!("unreadable image: {err}"))
+            }
+        };
+        self.push(record)
+    }
+
+    fn push(&mut self, record: EpochRecord) -> Result<()> {
+        let k = kitti_from_pose(&self.ds.datum, &record.left.to_pose());
+        writeln!(self.poses_file, "{}", format_pose(&k))?;
+        self.poses_file.flush()?;
+        self.kitti.push(k);
+        self.report.epochs.push(record);
+        Ok(())
+    }
+
+    /// The constant-velocity prediction of epoch `i` from the last two records.
+    fn prediction(&self, time: f64) -> Pose {
+        let e = &self.report.epochs;
+        match e.len() {
+            0 => self.ds.datum,
+            1 => e[0].left.to_pose(),
+            n => {
+                let (a, b) = (&e[n - 2], &e[n - 1]);
+                let ta = a.time.unwrap_or((n - 2) as f64);
+                let tb = b.time.unwrap_or((n - 1) as f64);
+                constant_velocity((&a.left.to_pose(), ta), (&b.left.to_pose(), tb), time)
+            }
+        }
+    }
+
+    fn predicted(&self, i: usize, time: f64, note: String) -> EpochRecord {
+        let left = self.prediction(time);
+        let right = self.ds.rig.right_pose(&left);
+        EpochRecord {
+            epoch: i,
+            time: Some(time),
+            status: EpochStatus::Predicted,
+            note: Some(note),
+            left: CameraEop::from_pose(&left, None),
+            right: CameraEop::from_pose(&right, None),
+            sigma0: None,
+            chi2_passed: None,
+            observations: 0,
+            tie_points: 0,
+            keypoints: [0; 2],
+            stereo_matches: 0,
+            stage_ms: Default::default(),
+        }
+    }
+
+    fn record(
+        &self,
+        i: usize,
+        time: f64,
+        r: &EpochResult,
+        timings: Option<[u32; 8]>,
+    ) -> EpochRecord {
+        let status = match r.status {
+            status::OK => EpochStatus::Ok,
+            status::FLAGGED => EpochStatus::Flagged,
+            status::PREDICTED => EpochStatus::Predicted,
+            status::LOST => EpochStatus::Lost,
+            _ => EpochStatus::Predicted,
+        };
+        let fl = r.extra[0] as u32;
+        if matches!(r.status, status::LOST | status::FAILED) {
+            // No pose came back: the host predicts it.
+            let mut rec = self.predicted(i, time, "frames lost on the link".into());
+            rec.status = status;
+            return rec;
+        }
+        let left = Pose::from_params(&r.pose);
+        let right = self.ds.rig.right_pose(&left);
+        let sigma = (r.sigma != [0.0; 6]).then_some(r.sigma);
+        let stage_ms = timings
+            .map(|t| {
+                stage::NAMES
+                    .iter()
+                    .zip(t)
+                    .filter(|(_, us)| *us > 0)
+                    .map(|(n, us)| (n.to_string(), us as f64 / 1000.0))
+                    .collect()
+            })
+            .unwrap_or_default();
+        EpochRecord {
+            epoch: i,
+            time: Some(time),
+            status,
+            note: flag_note(fl),
+            left: CameraEop::from_pose(&left, sigma),
+            right: CameraEop::from_pose(&right, None),
+            sigma0: (r.sigma0 > 0.0).then_some(r.sigma0),
+            chi2_passed: Some(fl & flags::CHI2 == 0),
+            observations: r.counts.observations as usize,
+            tie_points: r.counts.temporal_matches as usize,
+            keypoints: r.counts.keypoints,
+            stereo_matches: r.counts.stereo_matches,
+            stage_ms,
+        }
+    }
+
+    fn memory_lines(&self, high_water: Option<u32>) -> Vec<MemoryLine> {
+        let mut budget = MemoryBudget::new();
+        let configure = self.settings.configure(&self.ds.rig);
+        if let Ok(cfg) = phototraverse_firmware_sim::traverse_config(&configure) {
+            let _ = cfg.budget(&mut budget);
+        }
+        let kind = |k: ComponentKind| format!("{k:?}").to_lowercase();
+        let mut lines: Vec<MemoryLine> = budget
+            .components()
+            .iter()
+            .map(|c| MemoryLine {
+                name: c.name.to_string(),
+                kind: kind(c.kind),
+                predicted_bytes: c.bytes,
+                measured_bytes: None,
+            })
+            .collect();
+        lines.push(MemoryLine {
+            name: "frames (two buffers)".into(),
+            kind: "frame".into(),
+            predicted_bytes: self.accepted.frame_bytes as usize,
+            measured_bytes: None,
+        });
+        lines.push(MemoryLine {
+            name: "total (firmware arena)".into(),
+            kind: "all".into(),
+            predicted_bytes: self.accepted.predicted_bytes as usize,
+            measured_bytes: high_water.map(|h| h as usize),
+        });
+        lines
+    }
+
+    fn finish<T: crate::link::Transport>(mut self, session: &Session<T>) -> Result<RunOutcome> {
+        let last = self.report.epochs.len().checked_sub(1);
+        let high_water = last
+            .and_then(|l| session.stats(l as u32))
+            .map(|s| s.memory_high_water);
+        self.report.memory = self.memory_lines(high_water);
+        let mut evaluation = None;
+        if let Some(gt) = &self.ds.ground_truth {
+            let gt_part = &gt[..self.kitti.len().min(gt.len())];
+            self.report.ground_truth = Some(
+                gt_part
+                    .iter()
+                    .map(|k| pose_from_kitti(&self.ds.datum, k).centre)
+                    .collect(),
+            );
+            if let Ok(e) = evaluate(gt_part, &self.kitti) {
+                self.report.evaluation = serde_json::to_value(&e).ok();
+                evaluation = Some(e);
+            }
+        }
+        write_eop_csv(&self.out.join("eop.csv"), &self.report)?;
+        let json = serde_json::to_string_pretty(&self.report)?;
+        std::fs::write(self.out.join("report.json"), json + "\n")?;
+        write_html(&self.out.join("report.html"), &self.report)?;
+        Ok(RunOutcome {
+            median_epoch_ms: median(&mut self.epoch_ms),
+            report: self.report,
+            evaluation,
+            unreadable: self.unreadable,
+        })
+    }
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[v.len() / 2]
+}
+
+/// The flags of an epoch in words.
+fn flag_note(f: u32) -> Option<String> {
+    let names = [
+        (flags::FEW_TIE_POINTS, "few tie points"),
+        (flags::LOST, "continuity lost"),
+        (flags::NO_FEATURES, "no features"),
+        (flags::NO_STEREO, "no stereo matches"),
+        (flags::REPEATED, "repeated frame"),
+        (flags::CHI2, "chi-square test failed"),
+        (flags::SOLVE_FAILED, "adjustment failed"),
+        (flags::BAD_IMAGE, "image refused"),
+        (flags::CAPACITY, "capacity reached"),
+    ];
+    let words: Vec<&str> = names
+        .iter()
+        .filter(|(b, _)| f & b != 0)
+        .map(|(_, n)| *n)
+        .collect();
+    (!words.is_empty()).then(|| words.join(", "))
+}
