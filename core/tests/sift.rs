@@ -230,7 +230,7 @@ fn rotation_by_ninety_degrees_maps_keypoints_and_descriptors() {
             .map(|(kb, db)| {
                 let mut dtheta =
                     (kb.orientation - ka.orientation - core::f32::consts::FRAC_PI_2).abs();
-                dtheta = dtheta % (2.0 * core::f32::consts::PI);
+                dtheta %= 2.0 * core::f32::consts::PI;
                 dtheta = dtheta.min(2.0 * core::f32::consts::PI - dtheta);
                 let dist: f32 = da
                     .iter()
@@ -455,7 +455,7 @@ proptest! {
                 (0..w * h).map(|_| { s ^= s << 13; s ^= s >> 7; s ^= s << 17; s as u8 }).collect()
             }
             2 => vec![(seed % 256) as u8; w * h],
-            _ => (0..w * h).map(|i| if (i + seed as usize) % 3 == 0 { 255 } else { 0 }).collect(),
+            _ => (0..w * h).map(|i| if (i + seed as usize).is_multiple_of(3) { 255 } else { 0 }).collect(),
         };
         let c = SiftConfig { max_width: 64, max_height: 48, max_keypoints: cap, grid_cols: 3, grid_rows: 2, fine_octave: fine, upright, ..SiftConfig::default() };
         let r = run(c, &px, w, h);

@@ -9,6 +9,8 @@
 #![no_std]
 
 pub mod firmware;
+#[cfg(feature = "host")]
+pub mod hosted;
 pub mod link;
 pub mod processor;
 pub mod traverse_processor;

@@ -30,6 +30,13 @@ enum Command {
     Adjust(commands::adjust::Args),
     /// Memory budget of a configuration and image size.
     Budget(commands::budget::Args),
+    /// Run the firmware on this computer (what `--link child` starts): the no_std loop
+    /// with its link on stdin/stdout, `--tcp ADDR` or `--serial DEV`.
+    #[command(hide = true)]
+    Firmware {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
 }
 
 fn main() {
@@ -43,6 +50,9 @@ fn main() {
         Command::Match(a) => commands::match_pair::run(a),
         Command::Adjust(a) => commands::adjust::run(a),
         Command::Budget(a) => commands::budget::run(a),
+        Command::Firmware { args } => {
+            std::process::exit(phototraverse_firmware_sim::hosted::main_with_args(args))
+        }
     };
     if let Err(err) = result {
         eprintln!("phototraverse: error: {err:#}");

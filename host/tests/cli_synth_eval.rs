@@ -213,12 +213,26 @@ fn every_scene_writes_and_kitti_refuses_distortion() {
 }
 
 #[test]
-fn demo_runs_and_says_it_is_a_baseline() {
+fn demo_orients_the_synthetic_street_through_the_firmware() {
     let t = tempfile::tempdir().unwrap();
-    let out = ok(&["demo", "--frames", "3", "--out", t.path().to_str().unwrap()]);
+    let out = ok(&["demo", "--frames", "5", "--out", t.path().to_str().unwrap()]);
     assert!(
-        out.contains("NOT wired yet") && out.contains("ATE RMSE"),
+        out.contains("translation drift") && out.contains("ATE RMSE"),
         "{out}"
     );
-    assert!(t.path().join("baseline_eval.json").is_file());
+    let run = t.path().join("run");
+    let poses = std::fs::read_to_string(run.join("poses.txt")).unwrap();
+    assert_eq!(poses.lines().count(), 5, "{poses}");
+    for f in ["eop.csv", "report.json", "report.html"] {
+        assert!(run.join(f).is_file(), "{f} missing");
+    }
+    // A real orientation, not a placeholder: the last epoch is 4 m ahead (1 m per epoch).
+    let last: Vec<f64> = poses
+        .lines()
+        .last()
+        .unwrap()
+        .split_whitespace()
+        .map(|v| v.parse().unwrap())
+        .collect();
+    assert!((last[11] - 4.0).abs() < 0.2, "last pose {last:?}");
 }

@@ -285,6 +285,7 @@ fn child_process_session() {
     let opts = LinkOptions {
         link: LinkKind::Child,
         fw_memory: 4 << 20,
+        fw_processor: FirmwareProcessor::Sift,
         ..Default::default()
     };
     let t = opts.open().unwrap();

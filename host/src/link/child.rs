@@ -30,6 +30,24 @@ pub fn firmware_binary() -> anyhow::Result<PathBuf> {
     )
 }
 
+/// The command that starts the firmware, and its name for messages: the
+/// dedicated binary when [`firmware_binary`] finds it, else this very program as
+/// `phototraverse firmware` (the same no_std loop, hosted), so the `phototraverse`
+/// binary alone can play both ends of the link.
+pub fn firmware_command() -> anyhow::Result<(Command, String)> {
+    let missing = match firmware_binary() {
+        Ok(bin) => return Ok((Command::new(&bin), bin.display().to_string())),
+        Err(e) => e,
+    };
+    let exe = std::env::current_exe().context("locating the running executable")?;
+    if exe.file_stem().and_then(|s| s.to_str()) != Some("phototraverse") {
+        return Err(missing);
+    }
+    let mut cmd = Command::new(&exe);
+    cmd.arg("firmware");
+    Ok((cmd, format!("{} firmware", exe.display())))
+}
+
 /// Arguments passed to every spawned firmware.
 pub fn firmware_args(memory: usize, processor: super::FirmwareProcessor) -> Vec<String> {
     let p = match processor {
@@ -70,21 +88,21 @@ pub struct ChildLink {
 
 impl ChildLink {
     pub fn spawn(memory: usize, processor: super::FirmwareProcessor) -> anyhow::Result<Self> {
-        let bin = firmware_binary()?;
-        let mut child = Command::new(&bin)
+        let (mut cmd, bin) = firmware_command()?;
+        let mut child = cmd
             .args(firmware_args(memory, processor))
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
             .spawn()
-            .with_context(|| format!("starting the firmware {}", bin.display()))?;
+            .with_context(|| format!("starting the firmware {bin}"))?;
         let stdin = child.stdin.take().context("firmware stdin")?;
         let stdout = child.stdout.take().context("firmware stdout")?;
         Ok(ChildLink {
             inner: StreamTransport {
                 writer: BufWriter::with_capacity(64 * 1024, stdin),
                 incoming: Incoming::spawn(stdout, "child"),
-                name: format!("child process {}", bin.display()),
+                name: format!("child process {bin}"),
             },
             _child: ChildGuard(child),
         })
@@ -112,15 +130,15 @@ pub fn spawn_tcp_firmware(
     memory: usize,
     processor: super::FirmwareProcessor,
 ) -> anyhow::Result<(ChildGuard, String)> {
-    let bin = firmware_binary()?;
-    let mut child = Command::new(&bin)
+    let (mut cmd, bin) = firmware_command()?;
+    let mut child = cmd
         .args(firmware_args(memory, processor))
         .args(["--tcp", "127.0.0.1:0"])
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
         .spawn()
-        .with_context(|| format!("starting the firmware {}", bin.display()))?;
+        .with_context(|| format!("starting the firmware {bin}"))?;
     let stdout = child.stdout.take().context("firmware stdout")?;
     let guard = ChildGuard(child);
     let mut line = String::new();
