@@ -9,19 +9,8 @@ use phototraverse_core::protocol::messages::{
 };
 use phototraverse_core::sift::{Sift, SiftConfig, SiftError};
 
-/// A monotonic microsecond clock (the board's timer; `std::time::Instant` on the host).
-pub trait Clock {
-    fn now_us(&self) -> u64;
-}
-
-/// A clock that always reads zero (timings reported as 0).
-pub struct NoClock;
-
-impl Clock for NoClock {
-    fn now_us(&self) -> u64 {
-        0
-    }
-}
+/// The microsecond clock of the core (the board's timer; `std::time::Instant` on the host).
+pub use phototraverse_core::traverse::{Clock, NoClock};
 
 /// One complete stereo epoch.
 pub struct EpochInput<'i> {

@@ -11,7 +11,7 @@ use phototraverse_core::protocol::messages::{
     processor_kind, stage, status, Configure, EpochResult, AUX_GNSS, AUX_ODOMETER,
 };
 use phototraverse_core::traverse::{
-    self, flags, AuxObservations, EpochStatus, Traverse, TraverseConfig, TraverseError,
+    flags, AuxObservations, EpochStatus, Traverse, TraverseConfig, TraverseError,
 };
 
 /// Builds the traverse for a configuration.
@@ -90,10 +90,10 @@ impl ProcessorFactory for TraverseFactory {
     }
 }
 
-/// The firmware's clock seen through the core's clock trait.
+/// A `&dyn Clock` as a sized clock for the traverse's generic timing.
 struct ClockRef<'c>(&'c dyn Clock);
 
-impl traverse::Clock for ClockRef<'_> {
+impl Clock for ClockRef<'_> {
     fn now_us(&self) -> u64 {
         self.0.now_us()
     }
