@@ -6,7 +6,7 @@ use phototraverse_host::commands;
 /// image of a stereo sequence from the images alone, on a no_std core that runs
 /// behind an emulated serial link exactly as it would on board.
 #[derive(Parser)]
-#[command(name = "phototraverse", version, about, long_about = None)]
+#[command(name = "phototraverse", version)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -16,7 +16,7 @@ struct Cli {
 enum Command {
     /// Synthesize the default street, run it through the firmware and summarise.
     Demo(commands::demo::Args),
-    /// Orient a stereo sequence (KITTI or rig.toml layout) and write poses, EOPs, points, report.
+    /// Orient a stereo sequence (KITTI or rig.toml layout): poses, EOPs with precision, report.
     Run(commands::run::Args),
     /// Render a synthetic street sequence with ground truth.
     Synth(commands::synth::Args),
