@@ -43,6 +43,34 @@ enum Next {
     Eof,
 }
 
+/// Bytes of one frame buffer for a configuration.
+pub fn frame_bytes(config: &Configure) -> usize {
+    let p = &config.pipeline;
+    p.max_width as usize * p.max_height as usize * p.pixel_bytes as usize
+}
+
+/// What a configuration needs from the firmware's working storage: the two frame
+/// buffers and the processor's components. The firmware checks it before carving;
+/// the host predicts with the same function (`phototraverse budget`, run reports).
+pub fn configuration_budget<F: ProcessorFactory>(
+    factory: &F,
+    config: &Configure,
+    budget: &mut MemoryBudget,
+) -> Result<(), BuildError> {
+    let frame = frame_bytes(config);
+    budget.add(
+        "firmware.frame_left",
+        ComponentKind::Frame,
+        slice_bytes::<u8>(frame),
+    );
+    budget.add(
+        "firmware.frame_right",
+        ComponentKind::Frame,
+        slice_bytes::<u8>(frame),
+    );
+    factory.budget(config, budget)
+}
+
 /// The firmware: its working storage, processor factory, clock and limits.
 pub struct Firmware<'w, F, C> {
     work: &'w mut [u8],
@@ -157,19 +185,9 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
             )?;
             return Ok(Next::Idle);
         }
-        let frame = p.max_width as usize * p.max_height as usize * p.pixel_bytes as usize;
+        let frame = frame_bytes(config);
         let mut budget = MemoryBudget::new();
-        budget.add(
-            "firmware.frame_left",
-            ComponentKind::Frame,
-            slice_bytes::<u8>(frame),
-        );
-        budget.add(
-            "firmware.frame_right",
-            ComponentKind::Frame,
-            slice_bytes::<u8>(frame),
-        );
-        if let Err(e) = self.factory.budget(config, &mut budget) {
+        if let Err(e) = configuration_budget(&self.factory, config, &mut budget) {
             link.tx.error(
                 port,
                 ErrorCode::ConfigInvalid,

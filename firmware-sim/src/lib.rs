@@ -15,7 +15,7 @@ pub mod link;
 pub mod processor;
 pub mod traverse_processor;
 
-pub use firmware::{Firmware, Limits, FIRMWARE_VERSION};
+pub use firmware::{configuration_budget, frame_bytes, Firmware, Limits, FIRMWARE_VERSION};
 pub use link::LinkBuffers;
 pub use processor::{
     Clock, EpochInput, EpochOutput, EpochProcessor, ImageStatsFactory, NoClock, ProcessorFactory,

@@ -22,6 +22,7 @@ use phototraverse_core::protocol::messages::{
 };
 use phototraverse_core::traverse::flags;
 use phototraverse_core::traverse::motion::constant_velocity;
+use phototraverse_firmware_sim::{configuration_budget, TraverseFactory};
 use std::io::Write;
 use std::path::Path;
 
@@ -208,9 +209,9 @@ impl<'d> Run<'d> {
             0 => self.ds.datum,
             1 => e[0].left.to_pose(),
             n => {
+                // Every record carries its time (`time_of`): index seconds without times.txt.
                 let (a, b) = (&e[n - 2], &e[n - 1]);
-                let ta = a.time.unwrap_or((n - 2) as f64);
-                let tb = b.time.unwrap_or((n - 1) as f64);
+                let (ta, tb) = (a.time.unwrap_or_default(), b.time.unwrap_or_default());
                 constant_velocity((&a.left.to_pose(), ta), (&b.left.to_pose(), tb), time)
             }
         }
@@ -288,11 +289,10 @@ impl<'d> Run<'d> {
     }
 
     fn memory_lines(&self, high_water: Option<u32>) -> Vec<MemoryLine> {
+        // The firmware's own prediction: frames and traverse components.
         let mut budget = MemoryBudget::new();
         let configure = self.settings.configure(&self.ds.rig);
-        if let Ok(cfg) = phototraverse_firmware_sim::traverse_config(&configure) {
-            let _ = cfg.budget(&mut budget);
-        }
+        let _ = configuration_budget(&TraverseFactory, &configure, &mut budget);
         let kind = |k: ComponentKind| format!("{k:?}").to_lowercase();
         let mut lines: Vec<MemoryLine> = budget
             .components()
@@ -304,12 +304,6 @@ impl<'d> Run<'d> {
                 measured_bytes: None,
             })
             .collect();
-        lines.push(MemoryLine {
-            name: "frames (two buffers)".into(),
-            kind: "frame".into(),
-            predicted_bytes: self.accepted.frame_bytes as usize,
-            measured_bytes: None,
-        });
         lines.push(MemoryLine {
             name: "total (firmware arena)".into(),
             kind: "all".into(),

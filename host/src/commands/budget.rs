@@ -1,9 +1,9 @@
 //! `phototraverse budget`: the firmware's memory for a configuration and image size.
 use crate::pipeline::PipelineSettings;
 use anyhow::{Context, Result};
-use phototraverse_core::budget::{slice_bytes, ComponentKind, MemoryBudget};
+use phototraverse_core::budget::{ComponentKind, MemoryBudget};
 use phototraverse_core::camera::{Interior, Rig};
-use phototraverse_firmware_sim::{traverse_config, LinkBuffers};
+use phototraverse_firmware_sim::{configuration_budget, LinkBuffers, TraverseFactory};
 use serde::Serialize;
 use std::path::PathBuf;
 
@@ -74,21 +74,9 @@ pub fn budget_for(width: u32, height: u32, settings: &PipelineSettings) -> Resul
     );
     let rig = Rig::rectified(Interior::pinhole_px(width, height, width as f64), 0.5);
     let configure = settings.configure(&rig);
-    let cfg = traverse_config(&configure).map_err(|e| anyhow::anyhow!("configuration: {e:?}"))?;
     let mut budget = MemoryBudget::new();
-    let frame = width as usize * height as usize;
-    budget.add(
-        "firmware.frame_left",
-        ComponentKind::Frame,
-        slice_bytes::<u8>(frame),
-    );
-    budget.add(
-        "firmware.frame_right",
-        ComponentKind::Frame,
-        slice_bytes::<u8>(frame),
-    );
-    cfg.budget(&mut budget)
-        .map_err(|e| anyhow::anyhow!("feature extractor: {e:?}"))?;
+    configuration_budget(&TraverseFactory, &configure, &mut budget)
+        .map_err(|e| anyhow::anyhow!("configuration: {e:?}"))?;
     Ok(budget)
 }
 
