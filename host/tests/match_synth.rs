@@ -156,6 +156,8 @@ fn synthetic_quads_are_right() {
     let mut arena = Arena::new(&mut store);
     let mut m = Matcher::new(cfg, &mut arena).unwrap();
     let (mut total, mut off, mut unknown) = (0usize, 0usize, 0usize);
+    // Per image (prev left, prev right, cur left, cur right): signed errors of good quads.
+    let mut signed: [Vec<[f64; 2]>; 4] = Default::default();
     let mut per_epoch = Vec::new();
     for k in 0..data.len() {
         let f = &data[k];
@@ -196,12 +198,23 @@ fn synthetic_quads_are_right() {
             };
             let p = back_project(&truth, &gt[k - 1], t.prev.left, z);
             let obs = [t.prev.left, t.prev.right, t.cur.left, t.cur.right];
-            let errs: Vec<f64> = (0..4)
-                .map(|i| match project_to_pixel(&poses[i], &cams[i], &p) {
-                    Ok(q) => (q[0] - obs[i][0] as f64).hypot(q[1] - obs[i][1] as f64),
-                    Err(_) => f64::INFINITY,
+            let diffs: Vec<Option<[f64; 2]>> = (0..4)
+                .map(|i| {
+                    project_to_pixel(&poses[i], &cams[i], &p)
+                        .ok()
+                        .map(|q| [obs[i][0] as f64 - q[0], obs[i][1] as f64 - q[1]])
                 })
                 .collect();
+            let errs: Vec<f64> = diffs
+                .iter()
+                .map(|d| d.map_or(f64::INFINITY, |d| d[0].hypot(d[1])))
+                .collect();
+            if errs.iter().all(|&e| e <= 2.0) {
+                for (i, d) in diffs.iter().enumerate() {
+                    let d = d.unwrap();
+                    signed[i].push(d);
+                }
+            }
             let bad = errs.iter().any(|&e| e > 2.0);
             if bad && std::env::var("MATCH_SYNTH_VERBOSE").is_ok() {
                 println!(
@@ -221,6 +234,26 @@ fn synthetic_quads_are_right() {
         100.0 * off as f64 / checked.max(1) as f64,
         m.tracks().mean_length()
     );
+    for (name, d) in ["prev left", "prev right", "cur left", "cur right"]
+        .iter()
+        .zip(&signed)
+    {
+        let n = d.len().max(1) as f64;
+        let mean = [
+            d.iter().map(|v| v[0]).sum::<f64>() / n,
+            d.iter().map(|v| v[1]).sum::<f64>() / n,
+        ];
+        let mut abs: Vec<f64> = d.iter().map(|v| v[0].hypot(v[1])).collect();
+        abs.sort_by(f64::total_cmp);
+        let median = abs.get(abs.len() / 2).copied().unwrap_or(0.0);
+        println!(
+            "  {name}: mean error ({:+.3}, {:+.3}) px, median |error| {median:.3} px",
+            mean[0], mean[1]
+        );
+        // A bias (half-pixel convention, refinement skew) would scale the traverse.
+        assert!(mean[0].abs() < 0.1 && mean[1].abs() < 0.1, "{name} biased");
+        assert!(median < 0.4, "{name}: median error {median:.3} px");
+    }
     assert!(mean_per_epoch >= 50.0);
     assert!(off * 100 <= checked, "{off} of {checked} off by > 2 px");
 }
