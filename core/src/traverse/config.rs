@@ -75,7 +75,10 @@ impl TraverseConfig {
                 velocity_change_mps: 0.5,
                 ..ConstraintSigmas::default()
             },
-            tolerance: 1e-10,
+            // Each epoch starts from the last solution: a relative decrease of 1e-6
+            // moves the poses by far less than their sigma.
+            tolerance: 1e-6,
+            keep_exclusions: true,
             ..AdjustConfig::default()
         };
         TraverseConfig {
