@@ -9,7 +9,7 @@
 //! stereo-odometry peer of `bench/traverse/` runs on the same datasets.
 //!
 //! KEY=VALUE overrides the traverse configuration for experiments (keys listed by
-//! `--help`); without them it runs the firmware's defaults for the dataset's rig.
+//! `--help`; `poses=FILE` writes the estimated KITTI poses); without them it runs the firmware's defaults for the dataset's rig.
 use phototraverse_core::budget::{Arena, MemoryBudget};
 use phototraverse_core::camera::kitti_from_pose;
 use phototraverse_core::traverse::{Clock, Traverse, TraverseConfig};
@@ -33,10 +33,14 @@ impl Clock for ThreadClock {
 }
 
 const KEYS: &str = "keypoints contrast window sigma_px max_iterations tolerance \
-                    robust_rounds ratio tie_points keep_exclusions";
+                    robust_rounds ratio tie_points keep_exclusions fine_octave levels edge velocity_sigma robust max_depth min_ray_angle_deg refine temporal_refine min_ncc back_check";
 
 fn apply(cfg: &mut TraverseConfig, key: &str, value: &str) -> Result<(), String> {
-    let f = || value.parse::<f64>().map_err(|e| format!("{key}={value}: {e}"));
+    let f = || {
+        value
+            .parse::<f64>()
+            .map_err(|e| format!("{key}={value}: {e}"))
+    };
     match key {
         "keypoints" => {
             let n = f()? as usize;
@@ -54,6 +58,40 @@ fn apply(cfg: &mut TraverseConfig, key: &str, value: &str) -> Result<(), String>
         "robust_rounds" => cfg.adjust.max_robust_rounds = f()? as usize,
         "ratio" => cfg.matching.ratio = f()? as f32,
         "tie_points" => cfg.matching.max_tie_points = f()? as usize,
+        "fine_octave" => cfg.sift.fine_octave = f()? != 0.0,
+        "levels" => cfg.sift.levels = f()? as usize,
+        "edge" => cfg.sift.edge_threshold = f()? as f32,
+        "velocity_sigma" => cfg.adjust.sigmas.velocity_change_mps = f()?,
+        "robust" => {
+            cfg.adjust.robust = if f()? == 0.0 {
+                phototraverse_core::adjust::Robust::None
+            } else {
+                phototraverse_core::adjust::Robust::snooping()
+            }
+        }
+        "max_depth" => cfg.max_depth_m = f()?,
+        "min_ray_angle_deg" => cfg.min_ray_angle_rad = f()?.to_radians(),
+        "refine" => {
+            cfg.matching.refine =
+                (f()? != 0.0).then(|| phototraverse_core::matching::RefineConfig {
+                    rows_only: matches!(
+                        cfg.matching.stereo,
+                        phototraverse_core::matching::StereoGeometry::Rectified { .. }
+                    ),
+                    ..Default::default()
+                })
+        }
+        "temporal_refine" => cfg.temporal_refine = f()? != 0.0,
+        "min_ncc" => {
+            if let Some(r) = cfg.matching.refine.as_mut() {
+                r.min_ncc = f()? as f32;
+            }
+        }
+        "back_check" => {
+            if let Some(r) = cfg.matching.refine.as_mut() {
+                r.back_check_px = f()? as f32;
+            }
+        }
         "keep_exclusions" => cfg.adjust.keep_exclusions = f()? != 0.0,
         _ => return Err(format!("unknown key {key}; keys: {KEYS}")),
     }
@@ -80,9 +118,16 @@ fn main() -> Result<(), String> {
     }
     let ds = Dataset::open(&PathBuf::from(&args[0])).map_err(|e| e.to_string())?;
     let mut cfg = TraverseConfig::for_rig(ds.rig, ds.datum);
+    let mut poses_out = None;
     for kv in &args[1..] {
-        let (k, v) = kv.split_once('=').ok_or(format!("{kv}: expected KEY=VALUE"))?;
-        apply(&mut cfg, k, v)?;
+        let (k, v) = kv
+            .split_once('=')
+            .ok_or(format!("{kv}: expected KEY=VALUE"))?;
+        if k == "poses" {
+            poses_out = Some(PathBuf::from(v));
+        } else {
+            apply(&mut cfg, k, v)?;
+        }
     }
     let mut budget = MemoryBudget::new();
     cfg.budget(&mut budget).map_err(|e| format!("{e:?}"))?;
@@ -90,15 +135,28 @@ fn main() -> Result<(), String> {
     let mut arena = Arena::new(&mut store);
     let mut trav = Traverse::new(cfg, &mut arena).map_err(|e| e.to_string())?;
 
-    let names = ["sift_left", "sift_right", "matching", "initial", "adjust", "total"];
+    let names = [
+        "sift_left",
+        "sift_right",
+        "matching",
+        "initial",
+        "adjust",
+        "total",
+    ];
     let mut stages: [Vec<f64>; 6] = Default::default();
     let (mut ties, mut flagged) = (Vec::new(), 0usize);
     let (mut iters, mut obs) = (Vec::new(), Vec::new());
+    let (mut kps, mut stereo) = (Vec::new(), Vec::new());
     let mut poses = Vec::new();
     for i in 0..ds.len() {
         let (l, r) = ds.load_pair(i).map_err(|e| e.to_string())?;
         let (lv, rv) = (l.view().unwrap(), r.view().unwrap());
-        let out = trav.process(&lv, &rv, ds.epochs[i].time.unwrap_or(i as f64 * 0.1), &ThreadClock);
+        let out = trav.process(
+            &lv,
+            &rv,
+            ds.epochs[i].time.unwrap_or(i as f64 * 0.1),
+            &ThreadClock,
+        );
         let t = out.times;
         let us = [
             t.sift_left_us,
@@ -113,6 +171,8 @@ fn main() -> Result<(), String> {
         }
         ties.push(out.tie_points as f64);
         iters.push(out.iterations as f64);
+        kps.push(out.keypoints[0] as f64);
+        stereo.push(out.stereo_matches as f64);
         obs.push(out.observations as f64);
         flagged += (out.flags != 0) as usize;
         poses.push(kitti_from_pose(&ds.datum, &out.left));
@@ -124,12 +184,17 @@ fn main() -> Result<(), String> {
         println!("{n:<12} {m:>9.2} {p:>9.2}");
     }
     println!(
-        "per epoch (median): {:.0} tie points, {:.0} window observations, {:.0} \
+        "per epoch (median): {:.0} left keypoints, {:.0} stereo matches, {:.0} tie points, {:.0} window observations, {:.0} \
          iterations; epochs with flags: {flagged}",
+        percentile(&mut kps, 0.5),
+        percentile(&mut stereo, 0.5),
         percentile(&mut ties, 0.5),
         percentile(&mut obs, 0.5),
         percentile(&mut iters, 0.5),
     );
+    if let Some(path) = poses_out {
+        phototraverse_host::poses::write_poses(&path, &poses).map_err(|e| e.to_string())?;
+    }
     if let Some(gt) = &ds.ground_truth {
         let e = evaluate(gt, &poses).map_err(|e| e.to_string())?;
         print!("{}", e.summary());
