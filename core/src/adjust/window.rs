@@ -316,9 +316,15 @@ pub struct Window<'a> {
     cfg: AdjustConfig,
     rig: RigParams,
     rig_prior: RigParams,
+    /// Information of the rig prior: the calibration sigmas at first, the
+    /// marginal information of the estimate after a slide.
+    rig_prior_info: [f64; 36],
     nominal_base: f64,
     focal: [f64; 2],
     rig_std: [f64; 6],
+    /// Marginal covariance of the rig at the last solution (valid when `rig_cov_valid`).
+    rig_cov: [f64; 36],
+    rig_cov_valid: bool,
     rig_rot: Rotations,
     origin: [f64; 3],
     epochs: &'a mut [EpochSlot],
@@ -443,6 +449,16 @@ fn sym3_inverse(v: &Matrix3<f64>) -> Option<Matrix3<f64>> {
     v.try_inverse()
 }
 
+/// Diagonal information of the rig's calibration prior (`sigmas.rig_*`).
+fn calibration_info(s: &ConstraintSigmas) -> [f64; 36] {
+    let mut info = [0.0; 36];
+    for i in 0..6 {
+        let sig = if i < 3 { s.rig_angle_rad } else { s.rig_base_m };
+        info[i * 6 + i] = 1.0 / (sig * sig);
+    }
+    info
+}
+
 impl<'a> Window<'a> {
     /// An empty window for `rig`, carving its buffers from `arena`.
     pub fn new(cfg: AdjustConfig, rig: &Rig, arena: &mut Arena<'a>) -> Result<Self, AdjustError> {
@@ -470,9 +486,12 @@ impl<'a> Window<'a> {
             cfg,
             rig: r,
             rig_prior: r,
+            rig_prior_info: calibration_info(&cfg.sigmas),
             nominal_base: rig.base_length(),
             focal: [rig.left.focal_mm, rig.right.focal_mm],
             rig_std: [0.0; 6],
+            rig_cov: [0.0; 36],
+            rig_cov_valid: false,
             rig_rot: Rotations::new(r.angles[0], r.angles[1], r.angles[2]),
             origin: [0.0; 3],
             epochs,
@@ -871,6 +890,15 @@ impl<'a> Window<'a> {
         next.prior_info = info;
         next.flags |= EP_PRIOR;
         next.flags &= !EP_ODOMETER; // its odometer leg led to the dropped epoch
+                                    // The rig is shared by every epoch: it keeps its value, and what the dropped
+                                    // observations told about it stays as a prior from its marginal covariance.
+        if self.cfg.estimate_rig && self.rig_cov_valid {
+            let mut rinfo = [0.0; 36];
+            if invert6(&self.rig_cov, &mut rinfo) {
+                self.rig_prior = self.rig;
+                self.rig_prior_info = rinfo;
+            }
+        }
         self.epochs.copy_within(1..self.n_epochs, 0);
         self.n_epochs -= 1;
         self.first_id += 1;
@@ -1295,9 +1323,19 @@ impl<'a> Window<'a> {
         }
         if let Some(rb) = self.rig_block() {
             let r = prior_residual(&self.rig.to_array(), &self.rig_prior.to_array());
-            for (i, ri) in r.iter().enumerate() {
-                let sig = if i < 3 { s.rig_angle_rad } else { s.rig_base_m };
-                cost += self.row(normal, &[(6 * rb + i, 1.0)], *ri, 1.0 / (sig * sig));
+            let info = self.rig_prior_info;
+            for i in 0..6 {
+                let mut ir = 0.0;
+                for j in 0..6 {
+                    ir += info[i * 6 + j] * r[j];
+                    if normal {
+                        self.reduced[(6 * rb + i) * nc + 6 * rb + j] += info[i * 6 + j];
+                    }
+                }
+                cost += r[i] * ir;
+                if normal {
+                    self.rhs[6 * rb + i] -= ir;
+                }
             }
             count += 6;
             if s.base_length_m > 0.0 {
@@ -1863,9 +1901,12 @@ impl<'a> Window<'a> {
         }
         if let Some(rb) = rig_block {
             for i in 0..6 {
-                self.rig_std[i] =
-                    libm::sqrt((s02 * self.reduced[(6 * rb + i) * nc + 6 * rb + i]).max(0.0));
+                for j in 0..6 {
+                    self.rig_cov[i * 6 + j] = s02 * self.reduced[(6 * rb + i) * nc + 6 * rb + j];
+                }
+                self.rig_std[i] = libm::sqrt(self.rig_cov[i * 6 + i].max(0.0));
             }
+            self.rig_cov_valid = true;
         }
         // Points: Q_pp = V^-1 + V^-1 W^T Q_cc W V^-1.
         for p in 0..self.n_point_slots {
