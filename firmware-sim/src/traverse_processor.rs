@@ -155,8 +155,8 @@ impl EpochProcessor for TraverseProcessor<'_> {
         if self.traverse.config().adjust.estimate_rig {
             let (rig, std) = self.traverse.rig_estimate();
             result.rig = Some(RigEstimate {
-                params: rig.to_array(),
-                std,
+                params: rig.to_array().map(|v| v as f32),
+                std: std.map(|v| v as f32),
             });
         }
         let mut timings_us = [0u32; stage::COUNT];
@@ -226,5 +226,17 @@ mod tests {
             ..t
         };
         assert!(traverse_config(&configure(nan)).is_err());
+    }
+
+    #[test]
+    fn a_result_with_the_rig_fits_a_transmit_slot() {
+        let mut r = EpochResult::empty(u32::MAX, status::FLAGGED);
+        r.rig = Some(RigEstimate {
+            params: [1.0; 6],
+            std: [1.0; 6],
+        });
+        let mut buf = [0u8; 1024];
+        let n = r.emit(&mut buf).unwrap();
+        assert!(n <= crate::link::TX_MAX_PAYLOAD, "{n} bytes");
     }
 }

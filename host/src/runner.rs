@@ -300,10 +300,10 @@ impl<'d> Run<'d> {
     /// Keeps the estimated rig (right cameras, report) and the epoch's global test.
     fn note_rig_and_test(&mut self, r: &EpochResult) {
         if let Some(est) = &r.rig {
-            let p = est.params;
+            let p = est.params.map(f64::from);
             self.rig.relative_angles = [p[0], p[1], p[2]];
             self.rig.base_m = [p[3], p[4], p[5]];
-            let s = est.std;
+            let s = est.std.map(f64::from);
             let c = &self.ds.rig;
             self.report.rig = Some(RigReport {
                 relative_angles_deg: [p[0], p[1], p[2]].map(f64::to_degrees),

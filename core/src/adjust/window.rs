@@ -322,7 +322,7 @@ pub struct Window<'a> {
     nominal_base: f64,
     focal: [f64; 2],
     rig_std: [f64; 6],
-    /// Marginal covariance of the rig at the last solution (valid when `rig_cov_valid`).
+    /// Cofactor matrix `Q` of the rig at the last solution (valid when `rig_cov_valid`).
     rig_cov: [f64; 36],
     rig_cov_valid: bool,
     rig_rot: Rotations,
@@ -889,16 +889,9 @@ impl<'a> Window<'a> {
         next.prior = next.params;
         next.prior_info = info;
         next.flags |= EP_PRIOR;
-        next.flags &= !EP_ODOMETER; // its odometer leg led to the dropped epoch
-                                    // The rig is shared by every epoch: it keeps its value, and what the dropped
-                                    // observations told about it stays as a prior from its marginal covariance.
-        if self.cfg.estimate_rig && self.rig_cov_valid {
-            let mut rinfo = [0.0; 36];
-            if invert6(&self.rig_cov, &mut rinfo) {
-                self.rig_prior = self.rig;
-                self.rig_prior_info = rinfo;
-            }
-        }
+        // Its odometer leg led to the dropped epoch.
+        next.flags &= !EP_ODOMETER;
+        self.carry_rig_prior();
         self.epochs.copy_within(1..self.n_epochs, 0);
         self.n_epochs -= 1;
         self.first_id += 1;
@@ -909,6 +902,34 @@ impl<'a> Window<'a> {
         ];
         self.recentre(shift);
         Ok(dropped)
+    }
+
+    /// The rig is shared by every epoch: a slide keeps its value, and what the
+    /// dropped epoch told about it stays in its prior. The marginal information
+    /// `inv(Q_rig)` is the prior's plus the window's observations'; the dropped
+    /// epoch's share is taken as `1/n` of the latter, so the prior grows by one
+    /// epoch's worth per slide (carrying the whole marginal would count the
+    /// remaining epochs' observations again at every slide and make the rig
+    /// overconfident). Uses `Q` without sigma0, like the calibration prior.
+    fn carry_rig_prior(&mut self) {
+        if !(self.cfg.estimate_rig && self.rig_cov_valid) {
+            return;
+        }
+        let mut marginal = [0.0; 36];
+        if !invert6(&self.rig_cov, &mut marginal) {
+            return;
+        }
+        let n = self.n_epochs.max(1) as f64;
+        let mut info = self.rig_prior_info;
+        for (i, m) in info.iter_mut().zip(marginal) {
+            *i += (m - *i) / n;
+        }
+        let mut check = [0.0; 36];
+        if invert6(&info, &mut check) {
+            self.rig_prior = self.rig;
+            self.rig_prior_info = info;
+        }
+        self.rig_cov_valid = false;
     }
 
     /// Moves the local origin by `shift` (local coordinates).
@@ -1902,9 +1923,9 @@ impl<'a> Window<'a> {
         if let Some(rb) = rig_block {
             for i in 0..6 {
                 for j in 0..6 {
-                    self.rig_cov[i * 6 + j] = s02 * self.reduced[(6 * rb + i) * nc + 6 * rb + j];
+                    self.rig_cov[i * 6 + j] = self.reduced[(6 * rb + i) * nc + 6 * rb + j];
                 }
-                self.rig_std[i] = libm::sqrt(self.rig_cov[i * 6 + i].max(0.0));
+                self.rig_std[i] = libm::sqrt((s02 * self.rig_cov[i * 6 + i]).max(0.0));
             }
             self.rig_cov_valid = true;
         }

@@ -750,13 +750,35 @@ pub struct EpochResult {
     pub rig: Option<RigEstimate>,
 }
 
-/// The relative orientation estimated with an epoch.
+/// The relative orientation estimated with an epoch. `f32` on the wire keeps a
+/// Result within a 256-byte transmit slot; the values are small (angles of a few
+/// mrad, a base under a few metres), so `f32` keeps nanoradians and tens of nanometres.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RigEstimate {
     /// Relative angles omega, phi, kappa (rad) and base bx, by, bz (m), as in [`Rig`].
-    pub params: [f64; 6],
+    pub params: [f32; 6],
     /// Their standard deviations (zero when not available).
-    pub std: [f64; 6],
+    pub std: [f32; 6],
+}
+
+impl RigEstimate {
+    fn parse(r: &mut Reader) -> Result<Self, ParseError> {
+        let mut v = [0f32; 12];
+        for x in v.iter_mut() {
+            *x = r.f32()?;
+        }
+        Ok(RigEstimate {
+            params: core::array::from_fn(|i| v[i]),
+            std: core::array::from_fn(|i| v[6 + i]),
+        })
+    }
+
+    fn emit(&self, w: &mut Writer) -> Result<(), EncodeError> {
+        for x in self.params.iter().chain(self.std.iter()) {
+            w.f32(*x)?;
+        }
+        Ok(())
+    }
 }
 
 impl EpochResult {
@@ -794,10 +816,7 @@ repr!(
             },
             extra: r.f64s()?,
             rig: if r.remaining() > 0 {
-                Some(RigEstimate {
-                    params: r.f64s()?,
-                    std: r.f64s()?,
-                })
+                Some(RigEstimate::parse(&mut r)?)
             } else {
                 None
             },
@@ -820,8 +839,7 @@ repr!(
         ])?;
         w.f64s(&s.extra)?;
         if let Some(rig) = &s.rig {
-            w.f64s(&rig.params)?;
-            w.f64s(&rig.std)?;
+            rig.emit(&mut w)?;
         }
     }
 );

@@ -261,7 +261,7 @@ fn result_rig_block_is_optional_and_complete_when_present() {
         std: [1e-4, 2e-4, 3e-4, 1e-3, 2e-3, 3e-3],
     });
     let n = r.emit(&mut payload).unwrap();
-    assert_eq!(n, 265);
+    assert_eq!(n, 217);
     assert_eq!(EpochResult::parse(&payload[..n]).unwrap(), r);
     for cut in 170..n {
         assert_eq!(
