@@ -175,7 +175,7 @@ mod tests {
     use phototraverse_core::adjust::Robust;
     use phototraverse_core::camera::{Interior, Rig};
     use phototraverse_core::protocol::messages::{
-        Pipeline, TraverseMode, TraverseSettings, CONFIG_VERSION,
+        Pipeline, Repr, TraverseMode, TraverseSettings, CONFIG_VERSION,
     };
 
     fn configure(traverse: TraverseSettings) -> Configure {
