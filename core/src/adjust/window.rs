@@ -321,9 +321,15 @@ pub struct Window<'a> {
     cfg: AdjustConfig,
     rig: RigParams,
     rig_prior: RigParams,
+    /// Information of the rig prior: the calibration sigmas at first, the
+    /// marginal information of the estimate after a slide.
+    rig_prior_info: [f64; 36],
     nominal_base: f64,
     focal: [f64; 2],
     rig_std: [f64; 6],
+    /// Cofactor matrix `Q` of the rig at the last solution (valid when `rig_cov_valid`).
+    rig_cov: [f64; 36],
+    rig_cov_valid: bool,
     rig_rot: Rotations,
     origin: [f64; 3],
     epochs: &'a mut [EpochSlot],
@@ -448,6 +454,16 @@ fn sym3_inverse(v: &Matrix3<f64>) -> Option<Matrix3<f64>> {
     v.try_inverse()
 }
 
+/// Diagonal information of the rig's calibration prior (`sigmas.rig_*`).
+fn calibration_info(s: &ConstraintSigmas) -> [f64; 36] {
+    let mut info = [0.0; 36];
+    for i in 0..6 {
+        let sig = if i < 3 { s.rig_angle_rad } else { s.rig_base_m };
+        info[i * 6 + i] = 1.0 / (sig * sig);
+    }
+    info
+}
+
 impl<'a> Window<'a> {
     /// An empty window for `rig`, carving its buffers from `arena`.
     pub fn new(cfg: AdjustConfig, rig: &Rig, arena: &mut Arena<'a>) -> Result<Self, AdjustError> {
@@ -475,9 +491,12 @@ impl<'a> Window<'a> {
             cfg,
             rig: r,
             rig_prior: r,
+            rig_prior_info: calibration_info(&cfg.sigmas),
             nominal_base: rig.base_length(),
             focal: [rig.left.focal_mm, rig.right.focal_mm],
             rig_std: [0.0; 6],
+            rig_cov: [0.0; 36],
+            rig_cov_valid: false,
             rig_rot: Rotations::new(r.angles[0], r.angles[1], r.angles[2]),
             origin: [0.0; 3],
             epochs,
@@ -875,7 +894,9 @@ impl<'a> Window<'a> {
         next.prior = next.params;
         next.prior_info = info;
         next.flags |= EP_PRIOR;
-        next.flags &= !EP_ODOMETER; // its odometer leg led to the dropped epoch
+        // Its odometer leg led to the dropped epoch.
+        next.flags &= !EP_ODOMETER;
+        self.carry_rig_prior();
         self.epochs.copy_within(1..self.n_epochs, 0);
         self.n_epochs -= 1;
         self.first_id += 1;
@@ -886,6 +907,34 @@ impl<'a> Window<'a> {
         ];
         self.recentre(shift);
         Ok(dropped)
+    }
+
+    /// The rig is shared by every epoch: a slide keeps its value, and what the
+    /// dropped epoch told about it stays in its prior. The marginal information
+    /// `inv(Q_rig)` is the prior's plus the window's observations'; the dropped
+    /// epoch's share is taken as `1/n` of the latter, so the prior grows by one
+    /// epoch's worth per slide (carrying the whole marginal would count the
+    /// remaining epochs' observations again at every slide and make the rig
+    /// overconfident). Uses `Q` without sigma0, like the calibration prior.
+    fn carry_rig_prior(&mut self) {
+        if !(self.cfg.estimate_rig && self.rig_cov_valid) {
+            return;
+        }
+        let mut marginal = [0.0; 36];
+        if !invert6(&self.rig_cov, &mut marginal) {
+            return;
+        }
+        let n = self.n_epochs.max(1) as f64;
+        let mut info = self.rig_prior_info;
+        for (i, m) in info.iter_mut().zip(marginal) {
+            *i += (m - *i) / n;
+        }
+        let mut check = [0.0; 36];
+        if invert6(&info, &mut check) {
+            self.rig_prior = self.rig;
+            self.rig_prior_info = info;
+        }
+        self.rig_cov_valid = false;
     }
 
     /// Moves the local origin by `shift` (local coordinates).
@@ -1300,9 +1349,19 @@ impl<'a> Window<'a> {
         }
         if let Some(rb) = self.rig_block() {
             let r = prior_residual(&self.rig.to_array(), &self.rig_prior.to_array());
-            for (i, ri) in r.iter().enumerate() {
-                let sig = if i < 3 { s.rig_angle_rad } else { s.rig_base_m };
-                cost += self.row(normal, &[(6 * rb + i, 1.0)], *ri, 1.0 / (sig * sig));
+            let info = self.rig_prior_info;
+            for i in 0..6 {
+                let mut ir = 0.0;
+                for j in 0..6 {
+                    ir += info[i * 6 + j] * r[j];
+                    if normal {
+                        self.reduced[(6 * rb + i) * nc + 6 * rb + j] += info[i * 6 + j];
+                    }
+                }
+                cost += r[i] * ir;
+                if normal {
+                    self.rhs[6 * rb + i] -= ir;
+                }
             }
             count += 6;
             if s.base_length_m > 0.0 {
@@ -1899,9 +1958,12 @@ impl<'a> Window<'a> {
         }
         if let Some(rb) = rig_block {
             for i in 0..6 {
-                self.rig_std[i] =
-                    libm::sqrt((s02 * self.reduced[(6 * rb + i) * nc + 6 * rb + i]).max(0.0));
+                for j in 0..6 {
+                    self.rig_cov[i * 6 + j] = self.reduced[(6 * rb + i) * nc + 6 * rb + j];
+                }
+                self.rig_std[i] = libm::sqrt((s02 * self.rig_cov[i * 6 + i]).max(0.0));
             }
+            self.rig_cov_valid = true;
         }
         // Points: Q_pp = V^-1 + V^-1 W^T Q_cc W V^-1.
         for p in 0..self.n_point_slots {

@@ -24,7 +24,7 @@ pub mod patches;
 #[cfg(test)]
 mod tests;
 
-pub use config::TraverseConfig;
+pub use config::{TraverseConfig, TraverseMode};
 pub use output::{flags, EpochOutput, EpochStatus, StageTimes};
 
 use crate::adjust::geometry::camera_pose;
@@ -242,6 +242,12 @@ impl<'a> Traverse<'a> {
                     self.window.point_std(t.point),
                 ))
             })
+    }
+
+    /// The rig as the adjustment has it (the calibration when it is not estimated)
+    /// and its standard deviations (zero when fixed).
+    pub fn rig_estimate(&self) -> (crate::adjust::RigParams, [f64; 6]) {
+        (self.window.rig(), self.window.rig_std())
     }
 
     /// Right camera pose for a left pose, with the rig as last adjusted.
