@@ -106,11 +106,10 @@ pub enum SessionError {
         link: String,
         what: String,
     },
-    #[error("link error over {link}: {source}")]
-    Io {
-        link: String,
-        source: std::io::Error,
-    },
+    // The I/O error is part of the text and deliberately not a `source`: an
+    // `{:#}` chain would print it twice.
+    #[error("link error over {link}: {error}")]
+    Io { link: String, error: std::io::Error },
     #[error("the firmware rejected the configuration ({code}): {text}")]
     ConfigRejected { code: String, text: String },
     #[error("the firmware speaks protocol version {firmware}, this host speaks {host}")]
@@ -552,10 +551,10 @@ impl<T: Transport> Session<T> {
                 self.absorb(&bytes)?;
             }
             Ok(None) => {}
-            Err(source) => {
+            Err(error) => {
                 return Err(SessionError::Io {
                     link: self.t.describe(),
-                    source,
+                    error,
                 })
             }
         }
@@ -611,9 +610,9 @@ impl<T: Transport> Session<T> {
     fn write(&mut self, bytes: &[u8]) -> Result<(), SessionError> {
         self.link.bytes_sent += bytes.len() as u64;
         self.link.packets_sent += 1;
-        self.t.send(bytes).map_err(|source| SessionError::Io {
+        self.t.send(bytes).map_err(|error| SessionError::Io {
             link: self.t.describe(),
-            source,
+            error,
         })?;
         self.unflushed += bytes.len();
         if self.unflushed >= 64 * 1024 {
@@ -625,9 +624,9 @@ impl<T: Transport> Session<T> {
     fn flush(&mut self) -> Result<(), SessionError> {
         if self.unflushed > 0 {
             self.unflushed = 0;
-            self.t.flush().map_err(|source| SessionError::Io {
+            self.t.flush().map_err(|error| SessionError::Io {
                 link: self.t.describe(),
-                source,
+                error,
             })?;
         }
         Ok(())
