@@ -195,7 +195,7 @@ impl TraverseProcessor<'_> {
         let mut epochs = self.traverse.window_epochs().map(|e| e.0);
         let oldest = epochs.next()?;
         let full = self.traverse.window_epochs().count() >= self.traverse.config().adjust.window;
-        let after = |e: u32| self.report.reported.map_or(true, |r| e > r);
+        let after = |e: u32| !matches!(self.report.reported, Some(r) if e <= r);
         if self.report.flushing {
             core::iter::once(oldest).chain(epochs).find(|e| after(*e))
         } else {

@@ -1214,6 +1214,9 @@ repr!(
 );
 
 /// Any message, parsed by type.
+// No allocator to box into: a Points message (about 500 bytes) moves by value
+// like the configuration does; the firmware handles one message at a time.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Message<'a> {
     Hello(Hello),

@@ -170,16 +170,16 @@ fn points_fill_to_the_payload_limit_and_round_trip() {
     assert_eq!(m.wire_len(), POINTS_HEADER_LEN + 6 * POINT_RECORD_LEN);
     let mut buf = [0u8; 256];
     assert_eq!(m.emit(&mut buf).unwrap(), m.wire_len());
-    // 2 points + 5 observations = 9 + 80 + 130 = 219 bytes; a sixth observation would not fit.
+    // 2 points + 6 observations = 9 + 80 + 156 = 245 bytes; a seventh would not fit.
     let mut m = Points::new(7, 1);
     assert!(m.push_point(point, 256) && m.push_point(point, 256));
     let mut k = 0;
     while m.push_observation(obs, 256) {
         k += 1;
     }
-    assert_eq!(k, 5);
+    assert_eq!(k, 6);
     let n = m.emit(&mut buf).unwrap();
-    assert_eq!(n, 219);
+    assert_eq!(n, 245);
     assert_eq!(Points::parse(&buf[..n]).unwrap(), m);
     // A count above the capacity is refused, not read past the arrays.
     buf[7] = POINTS_MAX as u8 + 1;
