@@ -332,6 +332,16 @@ mod tests {
     use super::*;
 
     #[test]
+    fn residual_range_covers_the_99th_percentile() {
+        // 0.01 .. 1.00 px and one blunder: the range ends at 1.0, two lie at or beyond it.
+        let mut v: Vec<f32> = (1..=100).map(|k| k as f32 / 100.0).collect();
+        v.push(25.0);
+        assert_eq!(residual_range(&v), (1.0, 2));
+        // Tiny residuals keep a readable half-pixel range.
+        assert_eq!(residual_range(&[0.01, 0.02]), (0.5, 0));
+    }
+
+    #[test]
     fn report_has_every_plot_and_the_memory_table() {
         let mut report = RunReport {
             dataset: "straight <synthetic>".into(),
