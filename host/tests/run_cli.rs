@@ -210,6 +210,30 @@ fn run_writes_tie_points_efoto_and_the_residual_histogram() {
     );
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("Final image residuals"));
+
+    // Over a lossy, noisy link the reports are retransmitted, never lost or doubled:
+    // the same points, byte for byte.
+    let lossy = t.path().join("lossy");
+    let faults = [
+        "--link",
+        "inproc",
+        "--fault-drop",
+        "0.01",
+        "--fault-ber",
+        "1e-6",
+    ];
+    let o = run(sequence(), &lossy, &faults, &[]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(lossy.join("report.json")).unwrap()).unwrap();
+    assert!(report["link"]["retransmitted_packets"].as_u64().unwrap() > 0);
+    for f in ["points.ply", "efoto/measurements.txt"] {
+        assert_eq!(
+            std::fs::read(out.join(f)).unwrap(),
+            std::fs::read(lossy.join(f)).unwrap(),
+            "{f}"
+        );
+    }
 }
 
 #[test]
