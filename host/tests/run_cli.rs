@@ -349,3 +349,64 @@ fn a_firmware_that_dies_keeps_the_poses_processed() {
     assert_eq!(report["epochs"].as_array().unwrap().len(), kept);
     assert!(out.join("report.html").is_file() && out.join("points.ply").is_file());
 }
+
+/// On the wire, each observation and each point is reported exactly once: the
+/// observations of epoch e when it is the oldest of a full window (after the
+/// result of epoch e + 7), the rest at the flush.
+#[test]
+fn the_firmware_reports_each_record_once() {
+    use phototraverse_core::protocol::messages::{points_flags, PixelFormat};
+    use phototraverse_host::link::LinkOptions;
+    use phototraverse_host::pipeline::PipelineSettings;
+    use phototraverse_host::session::{connect, EpochFrames};
+    use std::collections::BTreeSet;
+
+    let ds = Dataset::open(sequence()).unwrap();
+    let mut s = connect(&LinkOptions::default()).unwrap();
+    s.configure(&PipelineSettings::default().configure(&ds.rig))
+        .unwrap();
+    let (mut obs, mut points) = (BTreeSet::new(), BTreeSet::new());
+    let mut absorb = |msgs: &[phototraverse_core::protocol::messages::Points],
+                      epochs: &mut BTreeSet<u32>| {
+        for m in msgs {
+            for o in m.observations() {
+                assert!(obs.insert((o.track, o.epoch, o.camera)), "{o:?} twice");
+                epochs.insert(o.epoch);
+            }
+            for p in m.points() {
+                assert!(points.insert(p.track), "point {} twice", p.track);
+            }
+        }
+    };
+    for i in 0..ds.len() {
+        let (l, r) = ds.load_pair(i).unwrap();
+        s.send_epoch(&EpochFrames {
+            epoch: i as u32,
+            timestamp_us: (ds.epochs[i].time.unwrap() * 1e6) as u64,
+            width: l.width as u16,
+            height: l.height as u16,
+            format: PixelFormat::Gray8,
+            left: &l.data,
+            right: &r.data,
+            aux: None,
+        })
+        .unwrap();
+        s.finish().unwrap();
+        let msgs = s.pull_points(false).unwrap();
+        assert!(msgs.iter().all(|m| m.flags & points_flags::FLUSH == 0));
+        let mut epochs = BTreeSet::new();
+        absorb(&msgs, &mut epochs);
+        // Window of 8: after epoch i >= 7, epoch i - 7 leaves next.
+        let expected: BTreeSet<u32> = (i >= 7).then(|| (i - 7) as u32).into_iter().collect();
+        assert_eq!(epochs, expected, "after epoch {i}");
+    }
+    let msgs = s.pull_points(true).unwrap();
+    let mut epochs = BTreeSet::new();
+    absorb(&msgs, &mut epochs);
+    assert_eq!(epochs, (FRAMES as u32 - 7..FRAMES as u32).collect());
+    // A second flush finds nothing left.
+    let again = s.pull_points(true).unwrap();
+    assert_eq!(again.len(), 1);
+    assert_eq!((again[0].n_points, again[0].n_obs), (0, 0));
+    assert!(points.len() > 100 && obs.len() > 4 * points.len() / 2);
+}
