@@ -198,14 +198,19 @@ impl<'d> Run<'d> {
                     })
                 })?;
                 let result = *session.result(e).context("result vanished")?;
+                let pulled = std::time::Instant::now();
                 for m in session.pull_points(false)? {
                     self.ties.absorb(&m);
                 }
+                let report_ms = pulled.elapsed().as_secs_f64() * 1e3;
                 if let Some(st) = session.stats(e) {
                     self.epoch_ms
                         .push(st.timings_us[stage::TOTAL] as f64 / 1000.0);
                 }
-                self.record(i, time, &result, session.stats(e).map(|s| s.timings_us))
+                let mut rec = self.record(i, time, &result, session.stats(e).map(|s| s.timings_us));
+                // Host-side round trips of the tie point report (firmware work and link).
+                rec.stage_ms.insert("points_report".into(), report_ms);
+                rec
             }
             Err(err) => {
                 eprintln!("phototraverse: warning: epoch {i}: {err}; its pose is predicted");
