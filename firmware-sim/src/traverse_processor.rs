@@ -261,8 +261,12 @@ impl TraverseProcessor<'_> {
                     self.report.next += 1;
                     continue;
                 };
+                // A record that does not fit even an empty message (a payload limit
+                // below one record) is skipped, so every request makes progress.
+                let empty = msg.n_points == 0 && msg.n_obs == 0;
                 if !self.report.points_phase {
-                    if !msg.push_observation(self.observation_record(i, &o), max_payload) {
+                    if !msg.push_observation(self.observation_record(i, &o), max_payload) && !empty
+                    {
                         return true;
                     }
                 } else if let (true, true) = self.first_and_final(i, &o) {
@@ -273,7 +277,7 @@ impl TraverseProcessor<'_> {
                             xyz,
                             std: [s[0] as f32, s[1] as f32, s[2] as f32],
                         };
-                        if !msg.push_point(rec, max_payload) {
+                        if !msg.push_point(rec, max_payload) && !empty {
                             return true;
                         }
                     }
