@@ -2,14 +2,14 @@
 //! frames of each epoch into buffers carved from the arena, run the processor
 //! on every complete epoch and answer results and statistics. A bad frame
 //! costs its epoch (an Error and a LOST result), never the session.
-use crate::link::{Flow, Link, LinkBuffers, Served, Tx, RX_WINDOW};
+use crate::link::{Flow, Link, LinkBuffers, Served, Tx, RX_WINDOW, TX_MAX_PAYLOAD};
 use crate::processor::{BuildError, Clock, EpochInput, EpochProcessor, ProcessorFactory};
 use embedded_io::{Read, Write};
 use phototraverse_core::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget};
 use phototraverse_core::protocol::assembly::{AssemblyError, FrameAssembler};
 use phototraverse_core::protocol::messages::{
-    stage, status, Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult, ErrorCode,
-    Message, Stats,
+    points_flags, stage, status, Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult,
+    ErrorCode, Message, Points, Stats,
 };
 use phototraverse_core::protocol::{MAX_PAYLOAD, PROTOCOL_VERSION};
 
@@ -268,6 +268,8 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
             predicted: budget.total() as u32,
             high_water: used as u32,
             capacity: capacity as u32,
+            last_epoch: u32::MAX,
+            points_index: 0,
         };
         let served = link.serve(port, |tx, port, seq, msg| epochs.handle(tx, port, seq, msg))?;
         Ok(match served {
@@ -328,7 +330,15 @@ struct Epochs<'a, 'c, Pr> {
     predicted: u32,
     high_water: u32,
     capacity: u32,
+    /// Epoch of the last result (named in tie point reports).
+    last_epoch: u32,
+    /// Index of the next Points message of the current report.
+    points_index: u16,
 }
+
+/// Most Points messages sent in answer to one request: the link keeps this many
+/// transmit slots free before it takes a message in.
+const POINTS_PER_REQUEST: usize = 4;
 
 impl<Pr: EpochProcessor> Epochs<'_, '_, Pr> {
     fn handle<P: Write>(
@@ -346,6 +356,7 @@ impl<Pr: EpochProcessor> Epochs<'_, '_, Pr> {
                 return Ok(Flow::Exit(Next::Idle));
             }
             Message::Aux(a) => self.aux = Some(a),
+            Message::PointsRequest(r) => self.points(tx, port, r.flush != 0)?,
             Message::FrameBegin(b) => {
                 if b.camera == Camera::Left {
                     self.started_us = self.clock.now_us();
@@ -413,6 +424,36 @@ impl<Pr: EpochProcessor> Epochs<'_, '_, Pr> {
         Ok(Flow::Continue)
     }
 
+    /// Answers a PointsRequest: up to [`POINTS_PER_REQUEST`] Points messages,
+    /// the last without [`points_flags::MORE`] once the report is complete.
+    fn points<P: Write>(&mut self, tx: &mut Tx, port: &mut P, flush: bool) -> Result<(), P::Error> {
+        for k in 0..POINTS_PER_REQUEST {
+            let mut msg = Points::new(self.last_epoch, self.points_index);
+            let more = self
+                .processor
+                .points(flush && k == 0, TX_MAX_PAYLOAD, &mut msg);
+            if more {
+                msg.flags |= points_flags::MORE;
+            }
+            if flush {
+                msg.flags |= points_flags::FLUSH;
+            }
+            if !more || k + 1 == POINTS_PER_REQUEST {
+                msg.flags |= points_flags::ANSWER_END;
+            }
+            self.points_index = if more {
+                self.points_index.wrapping_add(1)
+            } else {
+                0
+            };
+            tx.send(port, &Message::Points(msg))?;
+            if !more {
+                break;
+            }
+        }
+        Ok(())
+    }
+
     fn is_lost(&self, epoch: u32) -> bool {
         self.lost.contains(&epoch)
     }
@@ -471,6 +512,8 @@ impl<Pr: EpochProcessor> Epochs<'_, '_, Pr> {
         out.timings_us[stage::ASSEMBLE] = assembled.saturating_sub(self.started_us) as u32;
         out.timings_us[stage::TOTAL] = done.saturating_sub(self.started_us) as u32;
         self.ok += 1;
+        self.last_epoch = epoch;
+        self.points_index = 0;
         tx.send(port, &Message::Result(out.result))?;
         let stats = Stats {
             epoch,

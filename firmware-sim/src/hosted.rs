@@ -26,7 +26,8 @@ use std::io::{Read, Write};
 use std::time::Instant;
 
 const USAGE: &str = "usage: phototraverse-firmware-sim [--tcp ADDR | --serial DEV [--baud N]] \
-[--memory BYTES] [--max-width W] [--max-height H] [--processor traverse|sift|stats]";
+[--memory BYTES] [--max-width W] [--max-height H] [--processor traverse|sift|stats] \
+[--die-after-bytes N (fault injection: the process exits after reading N bytes)]";
 
 struct Options {
     tcp: Option<String>,
@@ -36,6 +37,8 @@ struct Options {
     limits: Limits,
     /// Image statistics instead of SIFT (bring-up).
     processor: Processor,
+    /// Fault injection for tests: exit abruptly once this many bytes were read.
+    die_after_bytes: Option<u64>,
 }
 
 fn parse_args(argv: Vec<String>) -> Result<Options, String> {
@@ -46,6 +49,7 @@ fn parse_args(argv: Vec<String>) -> Result<Options, String> {
         memory: 32 << 20,
         limits: Limits::default(),
         processor: Processor::Traverse,
+        die_after_bytes: None,
     };
     let mut args = argv.into_iter();
     while let Some(a) = args.next() {
@@ -76,6 +80,13 @@ fn parse_args(argv: Vec<String>) -> Result<Options, String> {
                     }
                 }
             }
+            "--die-after-bytes" => {
+                o.die_after_bytes = Some(
+                    value()?
+                        .parse()
+                        .map_err(|e| format!("--die-after-bytes: {e}"))?,
+                )
+            }
             "-h" | "--help" => return Err(USAGE.to_string()),
             other => return Err(format!("unknown argument {other}\n{USAGE}")),
         }
@@ -88,6 +99,8 @@ fn parse_args(argv: Vec<String>) -> Result<Options, String> {
 struct Port<R, W> {
     rx: R,
     tx: W,
+    /// Bytes left before the injected crash, if one is configured.
+    die_after: Option<u64>,
 }
 
 impl<R, W> embedded_io::ErrorType for Port<R, W> {
@@ -97,7 +110,21 @@ impl<R, W> embedded_io::ErrorType for Port<R, W> {
 impl<R: Read, W> embedded_io::Read for Port<R, W> {
     fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
         loop {
-            match self.rx.read(buf) {
+            let n = match self.die_after {
+                // Never read past the crash point: what follows it is never seen.
+                Some(left) => buf.len().min(left.max(1) as usize),
+                None => buf.len(),
+            };
+            let buf = &mut buf[..n];
+            let got = self.rx.read(buf);
+            if let (Ok(k), Some(left)) = (&got, self.die_after.as_mut()) {
+                *left = left.saturating_sub(*k as u64);
+                if *left == 0 {
+                    eprintln!("phototraverse-firmware-sim: injected fault: exiting after the configured bytes");
+                    std::process::exit(3);
+                }
+            }
+            match got {
                 Err(e)
                     if matches!(
                         e.kind(),
@@ -131,7 +158,11 @@ impl Clock for StdClock {
 fn serve<R: Read, W: Write>(o: &Options, rx: R, tx: W) -> std::io::Result<()> {
     let mut work = vec![0u8; o.memory];
     let mut buffers = Box::new(LinkBuffers::new());
-    let mut port = Port { rx, tx };
+    let mut port = Port {
+        rx,
+        tx,
+        die_after: o.die_after_bytes,
+    };
     let clock = StdClock(Instant::now());
     match o.processor {
         Processor::Traverse => {

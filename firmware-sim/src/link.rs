@@ -366,5 +366,6 @@ pub fn is_host_message(t: MessageType) -> bool {
             | MessageType::FrameEnd
             | MessageType::Aux
             | MessageType::Reset
+            | MessageType::PointsRequest
     )
 }

@@ -5,7 +5,7 @@ use phototraverse_core::budget::{Arena, ComponentKind, MemoryBudget, OutOfMemory
 use phototraverse_core::features::FeatureSet;
 use phototraverse_core::image::ImageView;
 use phototraverse_core::protocol::messages::{
-    processor_kind, stage, status, Aux, Configure, EpochResult,
+    processor_kind, stage, status, Aux, Configure, EpochResult, Points,
 };
 use phototraverse_core::sift::{Sift, SiftConfig, SiftError};
 
@@ -32,6 +32,15 @@ pub struct EpochOutput {
 /// The per-epoch work.
 pub trait EpochProcessor {
     fn process(&mut self, input: &EpochInput, clock: &dyn Clock) -> EpochOutput;
+
+    /// Fills `msg` (within `max_payload` bytes) with the next records of the
+    /// tie point report: points and observations that became final since the
+    /// last report; `flush` (the sequence ended) makes the whole window final.
+    /// Returns true when records remain for another message. Processors
+    /// without tie points report none.
+    fn points(&mut self, _flush: bool, _max_payload: usize, _msg: &mut Points) -> bool {
+        false
+    }
 }
 
 /// Why a processor could not be built for a configuration.

@@ -1,6 +1,8 @@
 //! The traverse behind the protocol loop: maps a `Configure` message to a
 //! [`TraverseConfig`], carves the traverse from the firmware's arena and answers
 //! every epoch with its orientation, precision, counts and stage timings.
+//! On request it reports the tie points and image observations that became
+//! final (their epoch is the next to leave the window), see [`TraverseProcessor`].
 use crate::processor::{
     BuildError, Clock, EpochInput, EpochOutput, EpochProcessor, ProcessorFactory,
 };
@@ -8,18 +10,39 @@ use phototraverse_core::budget::{Arena, MemoryBudget};
 use phototraverse_core::camera::Pose;
 use phototraverse_core::matching::StereoGeometry;
 use phototraverse_core::protocol::messages::{
-    processor_kind, stage, status, Configure, EpochResult, RigEstimate, AUX_GNSS, AUX_ODOMETER,
+    processor_kind, stage, status, Configure, EpochResult, PointObservation, PointRecord, Points,
+    RigEstimate, AUX_GNSS, AUX_ODOMETER,
 };
 use phototraverse_core::traverse::{
-    flags, AuxObservations, EpochStatus, Traverse, TraverseConfig, TraverseError,
+    flags, AuxObservations, EpochStatus, Traverse, TraverseConfig, TraverseError, WindowObservation,
 };
 
 /// Builds the traverse for a configuration.
 pub struct TraverseFactory;
 
 /// The traverse as an [`EpochProcessor`].
+///
+/// Tie point reports: once the window is full, its oldest epoch leaves at the
+/// next slide, so its observations (measured pixel, final residual) and the
+/// points whose last observation is in it are final after the adjustment that
+/// just ran. They are reported once each, epoch by epoch, in answer to the
+/// host's requests; a flush (end of the sequence) reports every epoch left.
 pub struct TraverseProcessor<'a> {
     traverse: Traverse<'a>,
+    report: ReportCursor,
+}
+
+/// Where the tie point report stands.
+#[derive(Debug, Clone, Copy, Default)]
+struct ReportCursor {
+    /// Last input epoch whose observations and final points were reported.
+    reported: Option<u32>,
+    /// Reporting the points of the current epoch (after its observations).
+    points_phase: bool,
+    /// Next window observation index to look at.
+    next: usize,
+    /// A flush was asked: every epoch in the window is final.
+    flushing: bool,
 }
 
 /// The traverse configuration a `Configure` message asks for.
@@ -96,7 +119,10 @@ impl ProcessorFactory for TraverseFactory {
     ) -> Result<TraverseProcessor<'a>, BuildError> {
         let cfg = traverse_config(config)?;
         let traverse = Traverse::new(cfg, arena).map_err(build_error)?;
-        Ok(TraverseProcessor { traverse })
+        Ok(TraverseProcessor {
+            traverse,
+            report: ReportCursor::default(),
+        })
     }
 }
 
@@ -121,7 +147,17 @@ fn aux_of(input: &EpochInput) -> AuxObservations {
 }
 
 impl EpochProcessor for TraverseProcessor<'_> {
+    fn points(&mut self, flush: bool, max_payload: usize, msg: &mut Points) -> bool {
+        self.report.flushing |= flush;
+        self.fill_points(max_payload, msg)
+    }
+
     fn process(&mut self, input: &EpochInput, clock: &dyn Clock) -> EpochOutput {
+        // A report not drained before the next epoch restarts on the new window.
+        self.report = ReportCursor {
+            reported: self.report.reported,
+            ..Default::default()
+        };
         let time_s = input.timestamps_us[0] as f64 * 1e-6;
         let out = self.traverse.process_with_aux(
             &input.left,
@@ -166,6 +202,118 @@ impl EpochProcessor for TraverseProcessor<'_> {
         timings_us[stage::INITIAL_VALUES] = out.times.initial_us;
         timings_us[stage::ADJUST] = out.times.adjust_us;
         EpochOutput { result, timings_us }
+    }
+}
+
+impl TraverseProcessor<'_> {
+    /// The next epoch to report: the oldest unreported window epoch, when the
+    /// window is full (it leaves at the next slide) or a flush was asked.
+    fn target(&self) -> Option<u32> {
+        let mut epochs = self.traverse.window_epochs().map(|e| e.0);
+        let oldest = epochs.next()?;
+        let full = self.traverse.window_epochs().count() >= self.traverse.config().adjust.window;
+        let after = |e: u32| !matches!(self.report.reported, Some(r) if e <= r);
+        if self.report.flushing {
+            core::iter::once(oldest).chain(epochs).find(|e| after(*e))
+        } else {
+            (full && after(oldest)).then_some(oldest)
+        }
+    }
+
+    /// Whether observation `i` (of `o`) is the first of its point in its epoch,
+    /// and whether the point has no observation in a later epoch (it is final).
+    fn first_and_final(&self, i: usize, o: &WindowObservation) -> (bool, bool) {
+        let (mut first, mut last) = (true, true);
+        for j in 0..self.traverse.window_observation_count() {
+            let Some(q) = self.traverse.window_observation(j) else {
+                continue;
+            };
+            if q.point != o.point {
+                continue;
+            }
+            first &= !(j < i && q.epoch == o.epoch);
+            last &= q.epoch <= o.epoch;
+            if !last {
+                break;
+            }
+        }
+        (first, last)
+    }
+
+    fn observation_record(&self, i: usize, o: &WindowObservation) -> PointObservation {
+        let (px, residual) = self
+            .traverse
+            .window_observation_pixels(i)
+            .unwrap_or(([f64::NAN; 2], None));
+        let mut flags = 0;
+        if o.flagged {
+            flags |= PointObservation::FLAGGED;
+        }
+        if residual.is_none() {
+            flags |= PointObservation::NO_RESIDUAL;
+        }
+        let r = residual.unwrap_or([0.0; 2]);
+        PointObservation {
+            track: o.track_id,
+            epoch: o.epoch,
+            camera: o.camera,
+            flags,
+            col: px[0] as f32,
+            row: px[1] as f32,
+            residual_px: [r[0] as f32, r[1] as f32],
+        }
+    }
+
+    /// Fills `msg` from the cursor on; true when it is full and records remain.
+    fn fill_points(&mut self, max_payload: usize, msg: &mut Points) -> bool {
+        while let Some(epoch) = self.target() {
+            let n = self.traverse.window_observation_count();
+            while self.report.next < n {
+                let i = self.report.next;
+                let Some(o) = self
+                    .traverse
+                    .window_observation(i)
+                    .filter(|o| o.epoch == epoch)
+                else {
+                    self.report.next += 1;
+                    continue;
+                };
+                // A record that does not fit even an empty message (a payload limit
+                // below one record) is skipped, so every request makes progress.
+                let empty = msg.n_points == 0 && msg.n_obs == 0;
+                if !self.report.points_phase {
+                    if !msg.push_observation(self.observation_record(i, &o), max_payload) && !empty
+                    {
+                        return true;
+                    }
+                } else if let (true, true) = self.first_and_final(i, &o) {
+                    if let Some((xyz, std)) = self.traverse.window_point(o.point) {
+                        let s = std.unwrap_or([0.0; 3]);
+                        let rec = PointRecord {
+                            track: o.track_id,
+                            xyz,
+                            std: [s[0] as f32, s[1] as f32, s[2] as f32],
+                        };
+                        if !msg.push_point(rec, max_payload) && !empty {
+                            return true;
+                        }
+                    }
+                }
+                self.report.next += 1;
+            }
+            if self.report.points_phase {
+                self.report = ReportCursor {
+                    reported: Some(epoch),
+                    flushing: self.report.flushing,
+                    ..Default::default()
+                };
+            } else {
+                self.report.points_phase = true;
+                self.report.next = 0;
+            }
+        }
+        self.report.flushing = false;
+        false
     }
 }
 

@@ -1,6 +1,9 @@
 //! `phototraverse run`: a dataset streamed through the emulated rig link to the
 //! firmware, which runs the core traverse; the answers become `poses.txt`,
-//! `eop.csv`, `report.json` and `report.html` in the output directory.
+//! `eop.csv`, `points.ply`, `efoto/` (E-Foto's point import), `report.json`
+//! and `report.html` in the output directory. After each result the host pulls
+//! the tie points and observations that became final (protocol `Points`), and
+//! at the end asks the firmware to flush its window.
 //!
 //! `poses.txt` is written line by line as results arrive, so whatever stops a
 //! run (a corrupt image is skipped, a dead firmware ends it) leaves the poses of
@@ -11,8 +14,8 @@ use crate::link::LinkOptions;
 use crate::pipeline::PipelineSettings;
 use crate::poses::{format_pose, KittiPose};
 use crate::report::{
-    write_eop_csv, write_html, CameraEop, EpochRecord, EpochStatus, MemoryLine, QualitySummary,
-    RigReport, RunReport,
+    efoto_image_index, write_efoto, write_eop_csv, write_html, write_ply, CameraEop, EpochRecord,
+    EpochStatus, MemoryLine, QualitySummary, RigReport, RunReport, TieCollector,
 };
 use crate::session::{EpochFrames, Session, SessionOptions};
 use anyhow::{Context, Result};
@@ -48,6 +51,10 @@ pub struct RunOutcome {
     pub median_epoch_ms: f64,
     /// Epochs whose images could not be read (skipped, pose predicted).
     pub unreadable: Vec<usize>,
+    /// Tie points written to `points.ply`.
+    pub tie_points: usize,
+    /// Median of the points' position standard deviation (sqrt(sX² + sY² + sZ²)), metres.
+    pub median_point_sigma_m: f64,
 }
 
 /// Runs `ds` into `out` (created if needed).
@@ -76,6 +83,15 @@ pub fn run_dataset(ds: &Dataset, out: &Path, opts: &RunOptions) -> Result<RunOut
     if failure.is_none() {
         if let Err(e) = session.finish() {
             failure = Some(anyhow::Error::new(e).context("waiting for the last results"));
+        }
+    }
+    if failure.is_none() {
+        // The sequence ended: the points and observations still in the window are final.
+        match session.pull_points(true) {
+            Ok(msgs) => msgs.iter().for_each(|m| run.ties.absorb(m)),
+            Err(e) => {
+                failure = Some(anyhow::Error::new(e).context("flushing the tie points"));
+            }
         }
     }
     run.report.link = serde_json::to_value(session.link_stats()).ok();
@@ -119,6 +135,8 @@ struct Run<'d> {
     rig: Rig,
     /// Two-sided global test of each adjusted epoch (from sigma0 and the redundancy).
     chi2: Vec<ChiSquareTest>,
+    /// Tie points and observations reported by the firmware.
+    ties: TieCollector,
 }
 
 impl<'d> Run<'d> {
@@ -150,6 +168,7 @@ impl<'d> Run<'d> {
             settings: opts.settings,
             rig: ds.rig,
             chi2: Vec::new(),
+            ties: TieCollector::default(),
         })
     }
 
@@ -187,11 +206,19 @@ impl<'d> Run<'d> {
                 })?;
                 let result = *session.result(e).context("result vanished")?;
                 self.note_rig_and_test(&result);
+                let pulled = std::time::Instant::now();
+                for m in session.pull_points(false)? {
+                    self.ties.absorb(&m);
+                }
+                let report_ms = pulled.elapsed().as_secs_f64() * 1e3;
                 if let Some(st) = session.stats(e) {
                     self.epoch_ms
                         .push(st.timings_us[stage::TOTAL] as f64 / 1000.0);
                 }
-                self.record(i, time, &result, session.stats(e).map(|s| s.timings_us))
+                let mut rec = self.record(i, time, &result, session.stats(e).map(|s| s.timings_us));
+                // Host-side round trips of the tie point report (firmware work and link).
+                rec.stage_ms.insert("points_report".into(), report_ms);
+                rec
             }
             Err(err) => {
                 eprintln!("phototraverse: warning: epoch {i}: {err}; its pose is predicted");
@@ -345,6 +372,25 @@ impl<'d> Run<'d> {
         })
     }
 
+    /// E-Foto image index and file name of every image of the epochs processed.
+    fn image_names(&self) -> Vec<(usize, String)> {
+        let file = |p: &Path| {
+            p.file_name()
+                .map_or_else(|| p.display().to_string(), |n| n.to_string_lossy().into())
+        };
+        self.report
+            .epochs
+            .iter()
+            .filter_map(|r| self.ds.epochs.get(r.epoch).map(|e| (r.epoch, e)))
+            .flat_map(|(i, e)| {
+                [
+                    (efoto_image_index(i, 0), file(&e.left)),
+                    (efoto_image_index(i, 1), file(&e.right)),
+                ]
+            })
+            .collect()
+    }
+
     fn memory_lines(&self, high_water: Option<u32>) -> Vec<MemoryLine> {
         // The firmware's own prediction: frames and traverse components.
         let mut budget = MemoryBudget::new();
@@ -392,11 +438,23 @@ impl<'d> Run<'d> {
             }
         }
         write_eop_csv(&self.out.join("eop.csv"), &self.report)?;
+        let points = self.ties.tie_points();
+        self.report.residuals_px = self.ties.residuals_px();
+        write_ply(&self.out.join("points.ply"), &points)?;
+        write_efoto(&self.out.join("efoto"), &points, &self.image_names())?;
         let json = serde_json::to_string_pretty(&self.report)?;
         std::fs::write(self.out.join("report.json"), json + "\n")?;
         write_html(&self.out.join("report.html"), &self.report)?;
         Ok(RunOutcome {
             median_epoch_ms: median(&mut self.epoch_ms),
+            tie_points: points.len(),
+            median_point_sigma_m: median(
+                &mut points
+                    .iter()
+                    .filter_map(|p| p.sigma)
+                    .map(|s| (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt())
+                    .collect::<Vec<f64>>(),
+            ),
             report: self.report,
             evaluation,
             unreadable: self.unreadable,

@@ -6,7 +6,7 @@ use phototraverse_core::protocol::crc::crc32;
 use phototraverse_core::protocol::messages::{
     nack_reason, status, Ack, Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult,
     ErrorCode, FrameBegin, FrameChunk, FrameEnd, Hello, Message, MessageType, Nack, PixelFormat,
-    Reset, Stats, CHUNK_HEADER_LEN,
+    Points, PointsRequest, Reset, Stats, CHUNK_HEADER_LEN,
 };
 use phototraverse_core::protocol::window::{seq_diff, Accept, RxSequence};
 use phototraverse_core::protocol::{
@@ -106,11 +106,10 @@ pub enum SessionError {
         link: String,
         what: String,
     },
-    #[error("link error over {link}: {source}")]
-    Io {
-        link: String,
-        source: std::io::Error,
-    },
+    // The I/O error is part of the text and deliberately not a `source`: an
+    // `{:#}` chain would print it twice.
+    #[error("link error over {link}: {error}")]
+    Io { link: String, error: std::io::Error },
     #[error("the firmware rejected the configuration ({code}): {text}")]
     ConfigRejected { code: String, text: String },
     #[error("the firmware speaks protocol version {firmware}, this host speaks {host}")]
@@ -161,6 +160,7 @@ enum Incoming {
     Accepted(ConfigAccepted),
     Result(EpochResult),
     Stats(Stats),
+    Points(Box<Points>),
     Error(FirmwareError, ErrorCode),
     Ack(Ack),
     Nack(Nack),
@@ -174,6 +174,7 @@ impl Incoming {
             Message::ConfigAccepted(c) => Incoming::Accepted(c),
             Message::Result(r) => Incoming::Result(r),
             Message::Stats(s) => Incoming::Stats(s),
+            Message::Points(p) => Incoming::Points(Box::new(p)),
             Message::Error(e) => Incoming::Error(
                 FirmwareError {
                     code: format!("{:?}", e.code),
@@ -226,6 +227,11 @@ pub struct Session<T: Transport> {
     errors: Vec<FirmwareError>,
     sent_epochs: Vec<(u32, Instant)>,
     link: LinkStats,
+    /// Tie point reports received and not yet taken.
+    points: Vec<Points>,
+    /// The answer to the last PointsRequest is complete; whether more is pending.
+    points_answered: bool,
+    points_more: bool,
 }
 
 impl<T: Transport> Session<T> {
@@ -264,6 +270,9 @@ impl<T: Transport> Session<T> {
             errors: Vec::new(),
             sent_epochs: Vec::new(),
             link: LinkStats::default(),
+            points: Vec::new(),
+            points_answered: false,
+            points_more: false,
         };
         let session = rand::random::<u32>();
         let version = env!("CARGO_PKG_VERSION")
@@ -387,6 +396,24 @@ impl<T: Transport> Session<T> {
                 None => false,
             })
         })
+    }
+
+    /// Pulls the firmware's tie point report: requests until the report is
+    /// complete and returns its messages. `flush`: the sequence ended, the
+    /// firmware makes its whole window final first.
+    pub fn pull_points(&mut self, flush: bool) -> Result<Vec<Points>, SessionError> {
+        let mut flush = flush;
+        loop {
+            self.points_answered = false;
+            self.send_message(&Message::PointsRequest(PointsRequest {
+                flush: flush as u8,
+            }))?;
+            flush = false;
+            self.wait_for("the tie point report", |s| s.points_answered)?;
+            if !self.points_more {
+                return Ok(std::mem::take(&mut self.points));
+            }
+        }
     }
 
     /// The result of an epoch, if it arrived.
@@ -526,10 +553,10 @@ impl<T: Transport> Session<T> {
                 self.absorb(&bytes)?;
             }
             Ok(None) => {}
-            Err(source) => {
+            Err(error) => {
                 return Err(SessionError::Io {
                     link: self.t.describe(),
-                    source,
+                    error,
                 })
             }
         }
@@ -585,9 +612,9 @@ impl<T: Transport> Session<T> {
     fn write(&mut self, bytes: &[u8]) -> Result<(), SessionError> {
         self.link.bytes_sent += bytes.len() as u64;
         self.link.packets_sent += 1;
-        self.t.send(bytes).map_err(|source| SessionError::Io {
+        self.t.send(bytes).map_err(|error| SessionError::Io {
             link: self.t.describe(),
-            source,
+            error,
         })?;
         self.unflushed += bytes.len();
         if self.unflushed >= 64 * 1024 {
@@ -599,9 +626,9 @@ impl<T: Transport> Session<T> {
     fn flush(&mut self) -> Result<(), SessionError> {
         if self.unflushed > 0 {
             self.unflushed = 0;
-            self.t.flush().map_err(|source| SessionError::Io {
+            self.t.flush().map_err(|error| SessionError::Io {
                 link: self.t.describe(),
-                source,
+                error,
             })?;
         }
         Ok(())
@@ -771,6 +798,14 @@ impl<T: Transport> Session<T> {
             }
             Incoming::Stats(s) => {
                 self.stats.insert(s.epoch, s);
+            }
+            Incoming::Points(p) => {
+                use phototraverse_core::protocol::messages::points_flags;
+                if p.flags & points_flags::ANSWER_END != 0 {
+                    self.points_answered = true;
+                    self.points_more = p.flags & points_flags::MORE != 0;
+                }
+                self.points.push(*p);
             }
             Incoming::Error(e, code) => {
                 if matches!(code, ErrorCode::ConfigTooLarge | ErrorCode::ConfigInvalid) {

@@ -164,9 +164,18 @@ fn unreadable_file() {
     let t = tempfile::tempdir().unwrap();
     kitti(t.path(), 2);
     std::fs::write(t.path().join("image_0/000001.png"), b"not a png at all").unwrap();
-    let e = err(t.path());
+    // The dataset opens (a corrupt frame costs its epoch, not the run); loading names the file.
+    let ds = Dataset::open(t.path()).unwrap();
+    let e = ds.load_pair(1).unwrap_err().to_string();
     assert!(
         e.contains("image_0/000001.png") && e.contains("unreadable image"),
+        "{e}"
+    );
+    // The first image gives the size: unreadable there, the dataset cannot open.
+    std::fs::write(t.path().join("image_0/000000.png"), b"not a png either").unwrap();
+    let e = err(t.path());
+    assert!(
+        e.contains("image_0/000000.png") && e.contains("unreadable image"),
         "{e}"
     );
     // load_gray names the file too.

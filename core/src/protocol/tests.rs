@@ -8,7 +8,7 @@ use super::messages::*;
 use super::*;
 use crate::camera::{Interior, Rig};
 
-fn sample_messages(chunk: &[u8]) -> [Message<'_>; 14] {
+fn sample_messages(chunk: &[u8]) -> [Message<'_>; 16] {
     let rig = Rig::rectified(Interior::pinhole_px(640, 480, 700.0), 0.54);
     [
         Message::Hello(Hello {
@@ -119,7 +119,81 @@ fn sample_messages(chunk: &[u8]) -> [Message<'_>; 14] {
             reason: nack_reason::GAP,
         }),
         Message::Reset(Reset { reason: 1 }),
+        Message::Points(sample_points()),
+        Message::PointsRequest(PointsRequest { flush: 1 }),
     ]
+}
+
+/// A Points message with two points and three observations.
+fn sample_points() -> Points {
+    let mut m = Points::new(41, 3);
+    m.flags = points_flags::MORE;
+    for k in 0..2u32 {
+        assert!(m.push_point(
+            PointRecord {
+                track: 100 + k,
+                xyz: [1.5 + k as f64, 20.25, -1.125],
+                std: [0.01, 0.25, 0.02],
+            },
+            MAX_PAYLOAD
+        ));
+    }
+    for k in 0..3u32 {
+        assert!(m.push_observation(
+            PointObservation {
+                track: 100 + k % 2,
+                epoch: 40 + k,
+                camera: (k % 2) as u8,
+                flags: PointObservation::FLAGGED * (k == 2) as u8,
+                col: 310.5 + k as f32,
+                row: 12.25,
+                residual_px: [0.125, -0.5],
+            },
+            MAX_PAYLOAD
+        ));
+    }
+    m
+}
+
+#[test]
+fn points_fill_to_the_payload_limit_and_round_trip() {
+    let mut m = Points::new(7, 0);
+    let point = PointRecord {
+        track: 9,
+        xyz: [1.0, 2.0, 3.0],
+        std: [0.1; 3],
+    };
+    let obs = PointObservation {
+        track: 9,
+        ..Default::default()
+    };
+    // A 256-byte limit (the firmware's answers): 6 points take 249 bytes.
+    let mut n = 0;
+    while m.push_point(point, 256) {
+        n += 1;
+    }
+    assert_eq!(n, 6);
+    assert!(!m.push_observation(obs, 256));
+    assert_eq!(m.wire_len(), POINTS_HEADER_LEN + 6 * POINT_RECORD_LEN);
+    let mut buf = [0u8; 256];
+    assert_eq!(m.emit(&mut buf).unwrap(), m.wire_len());
+    // 2 points + 6 observations = 9 + 80 + 156 = 245 bytes; a seventh would not fit.
+    let mut m = Points::new(7, 1);
+    assert!(m.push_point(point, 256) && m.push_point(point, 256));
+    let mut k = 0;
+    while m.push_observation(obs, 256) {
+        k += 1;
+    }
+    assert_eq!(k, 6);
+    let n = m.emit(&mut buf).unwrap();
+    assert_eq!(n, 245);
+    assert_eq!(Points::parse(&buf[..n]).unwrap(), m);
+    // A count above the capacity is refused, not read past the arrays.
+    buf[7] = POINTS_MAX as u8 + 1;
+    assert_eq!(
+        Points::parse(&buf[..n]),
+        Err(ParseError::Invalid("points: record count above capacity"))
+    );
 }
 
 fn encode(msg: &Message, seq: u16, out: &mut [u8]) -> usize {

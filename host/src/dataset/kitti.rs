@@ -48,6 +48,13 @@ pub fn parse_calib(text: &str, path: &Path) -> Result<(Projection, Projection), 
         for (k, v) in values.iter().enumerate() {
             m[k / 4][k % 4] = *v;
         }
+        let (fx, fy) = (m[0][0], m[1][1]);
+        if matches!(key.trim(), "P0" | "P1") && !(fx > 0.0 && fy > 0.0) {
+            // Caught here, where the line is known, rather than in rig_from_calib.
+            return Err(bad(format!(
+                "{key}: non-positive focal length (fx = {fx}, fy = {fy})"
+            )));
+        }
         match key.trim() {
             "P0" => p0 = Some(m),
             "P1" => p1 = Some(m),
@@ -216,9 +223,16 @@ Tr: 4.276802385584e-04 -9.999672484946e-01 -8.084491683471e-03 -1.198459927713e-
             .unwrap_err()
             .to_string();
         assert!(e.contains("missing calibration row P1"), "{e}");
-        let text = "P0: -5 0 320 0 0 400 240 0 0 0 1 0\nP1: 500 0 320 -250 0 400 240 0 0 0 1 0\n";
-        let (p0, p1) = parse_calib(text, Path::new("c")).unwrap();
-        let e = rig_from_calib(&p0, &p1, 640, 480, Path::new("c"))
+        let text = "P0: 500 0 320 0 0 400 240 0 0 0 1 0\nP1: 0 0 320 -250 0 400 240 0 0 0 1 0\n";
+        let e = parse_calib(text, Path::new("c")).unwrap_err().to_string();
+        assert!(
+            e.contains("line 2") && e.contains("P1: non-positive focal length"),
+            "{e}"
+        );
+        let mut p0 = [[0.0; 4]; 3];
+        p0[0][0] = -5.0;
+        p0[1][1] = 400.0;
+        let e = rig_from_calib(&p0, &p0, 640, 480, Path::new("c"))
             .unwrap_err()
             .to_string();
         assert!(

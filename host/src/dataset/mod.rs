@@ -304,7 +304,11 @@ fn check_sizes(
 ) -> Result<(), DatasetError> {
     for (_, l, r) in pairs {
         for (path, (ew, eh)) in [(l, left), (r, right)] {
-            let (w, h) = image_size(path)?;
+            // An image whose header cannot be read is left to `load_pair`: a corrupt
+            // frame costs its epoch (predicted, flagged), not the whole run.
+            let Ok((w, h)) = image_size(path) else {
+                continue;
+            };
             if (w, h) != (ew, eh) {
                 return Err(DatasetError::SizeMismatch {
                     path: path.clone(),

@@ -62,7 +62,10 @@ fn sigma_fields(e: &CameraEop) -> String {
     }
 }
 
-/// `points.ply`: ASCII PLY of the tie points with their observation count.
+/// `points.ply`: ASCII PLY of the tie points (object frame, metres): x y z,
+/// their standard deviations (`nan` when the adjustment gave none), the track
+/// id and the number of image observations. CloudCompare, MeshLab and Python
+/// `plyfile` read it; the extra properties become scalar fields.
 pub fn write_ply(path: &Path, points: &[TiePoint]) -> Result<()> {
     let mut w = create(path)?;
     writeln!(
@@ -73,18 +76,38 @@ pub fn write_ply(path: &Path, points: &[TiePoint]) -> Result<()> {
     writeln!(w, "property double x\nproperty double y\nproperty double z")?;
     writeln!(
         w,
+        "property float sigma_x\nproperty float sigma_y\nproperty float sigma_z"
+    )?;
+    writeln!(
+        w,
         "property uint id\nproperty uchar observations\nend_header"
     )?;
     for p in points {
         let n = p.measurements.len().min(255);
+        let s = p.sigma.unwrap_or([f64::NAN; 3]);
         writeln!(
             w,
-            "{:.6} {:.6} {:.6} {} {}",
-            p.xyz[0], p.xyz[1], p.xyz[2], p.id, n
+            "{:.6} {:.6} {:.6} {} {} {} {} {}",
+            p.xyz[0],
+            p.xyz[1],
+            p.xyz[2],
+            fmt_sigma(s[0]),
+            fmt_sigma(s[1]),
+            fmt_sigma(s[2]),
+            p.id,
+            n
         )?;
     }
     w.flush()?;
     Ok(())
+}
+
+fn fmt_sigma(s: f64) -> String {
+    if s.is_finite() {
+        format!("{s:.6}")
+    } else {
+        "nan".into()
+    }
 }
 
 /// E-Foto's image index of a camera at an epoch, numbered as seed 000 numbers its
@@ -201,7 +224,10 @@ mod tests {
         write_ply(&dir.path().join("p.ply"), &points).unwrap();
         let ply = std::fs::read_to_string(dir.path().join("p.ply")).unwrap();
         assert!(ply.contains("element vertex 1\n"));
-        assert!(ply.trim_end().ends_with("1.000000 20.000000 -1.500000 7 2"));
+        assert!(ply.contains("property float sigma_z\n"));
+        assert!(ply
+            .trim_end()
+            .ends_with("1.000000 20.000000 -1.500000 0.010000 0.100000 0.010000 7 2"));
 
         let names = vec![(7, "E004.png".to_string()), (8, "D004.png".to_string())];
         write_efoto(&dir.path().join("efoto"), &points, &names).unwrap();

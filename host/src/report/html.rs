@@ -135,6 +135,19 @@ fn histogram(title: &str, xl: &str, values: &[f32], bins: usize, max: f64) -> Re
     Ok(svg)
 }
 
+/// Histogram range of the residuals: the 99th percentile rounded up to a
+/// tenth of a pixel (at least 0.5 px), and how many lie beyond it.
+fn residual_range(values: &[f32]) -> (f64, usize) {
+    let mut v: Vec<f32> = values.iter().map(|x| x.abs()).collect();
+    v.sort_by(|a, b| a.total_cmp(b));
+    let p99 = v
+        .get((v.len() * 99 / 100).min(v.len().saturating_sub(1)))
+        .map_or(1.0, |x| *x as f64);
+    let max = ((p99 * 10.0).ceil() / 10.0).max(0.5);
+    let beyond = v.iter().filter(|x| **x as f64 >= max).count();
+    (max, beyond)
+}
+
 fn per_epoch(
     report: &RunReport,
     f: impl Fn(&super::EpochRecord) -> Option<f64>,
@@ -258,14 +271,18 @@ pub fn write_html(path: &Path, report: &RunReport) -> Result<()> {
         line_chart("Tie points per epoch", "epoch", "count", &ties, false)?,
     ));
     if !report.residuals_px.is_empty() {
+        let (max, beyond) = residual_range(&report.residuals_px);
         sections.push((
             "Residuals",
             histogram(
-                "Image residuals",
+                &format!(
+                    "Final image residuals, {} observations ({beyond} beyond {max:.1} px)",
+                    report.residuals_px.len()
+                ),
                 "|residual| (px)",
                 &report.residuals_px,
                 40,
-                2.0,
+                max,
             )?,
         ));
     }
@@ -313,6 +330,16 @@ pub fn write_html(path: &Path, report: &RunReport) -> Result<()> {
 mod tests {
     use super::super::records::*;
     use super::*;
+
+    #[test]
+    fn residual_range_covers_the_99th_percentile() {
+        // 0.01 .. 1.00 px and one blunder: the range ends at 1.0, two lie at or beyond it.
+        let mut v: Vec<f32> = (1..=100).map(|k| k as f32 / 100.0).collect();
+        v.push(25.0);
+        assert_eq!(residual_range(&v), (1.0, 2));
+        // Tiny residuals keep a readable half-pixel range.
+        assert_eq!(residual_range(&[0.01, 0.02]), (0.5, 0));
+    }
 
     #[test]
     fn report_has_every_plot_and_the_memory_table() {

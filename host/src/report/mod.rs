@@ -7,10 +7,12 @@
 
 mod export;
 mod html;
+mod points;
 mod records;
 
-pub use export::{write_efoto, write_eop_csv, write_ply};
+pub use export::{efoto_image_index, write_efoto, write_eop_csv, write_ply};
 pub use html::write_html;
+pub use points::TieCollector;
 pub use records::{
     CameraEop, EpochRecord, EpochStatus, ImageMeasurement, MemoryLine, QualitySummary, RigReport,
     RunReport, TiePoint,

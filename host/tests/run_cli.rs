@@ -1,0 +1,419 @@
+//! `phototraverse run` end to end on a small synthetic sequence: the tie point
+//! outputs (points.ply, E-Foto files, residual histogram) and its behaviour on
+//! bad input (missing dataset, wrong calibration, a corrupt image, a firmware
+//! that dies mid-run).
+use phototraverse_core::camera::{project_to_pixel, Pose};
+use phototraverse_host::dataset::Dataset;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+/// Epochs of the shared sequence: more than the 8-epoch window, so tie points
+/// are reported both as epochs leave the window and by the final flush.
+const FRAMES: usize = 10;
+
+fn phototraverse(args: &[&str], env: &[(&str, &Path)]) -> Output {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_phototraverse"));
+    cmd.args(args);
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    cmd.output().expect("binary runs")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// The synthetic `straight` sequence, rendered once for every test here (in the
+/// target's scratch directory, replaced on each test run).
+fn sequence() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join("run_cli_straight");
+        let _ = std::fs::remove_dir_all(&d);
+        let frames = FRAMES.to_string();
+        let out = phototraverse(
+            &[
+                "synth",
+                "--scene",
+                "straight",
+                "--frames",
+                &frames,
+                "--out",
+                d.to_str().unwrap(),
+            ],
+            &[],
+        );
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        d
+    })
+}
+
+/// A private copy of the sequence to damage.
+fn copy_sequence(to: &Path) -> PathBuf {
+    let dst = to.join("ds");
+    copy_dir(sequence(), &dst);
+    dst
+}
+
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let p = e.unwrap().path();
+        let target = to.join(p.file_name().unwrap());
+        if p.is_dir() {
+            copy_dir(&p, &target);
+        } else {
+            std::fs::copy(&p, &target).unwrap();
+        }
+    }
+}
+
+fn run(ds: &Path, out: &Path, extra: &[&str], env: &[(&str, &Path)]) -> Output {
+    let mut args = vec![
+        "run",
+        ds.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ];
+    args.extend_from_slice(extra);
+    phototraverse(&args, env)
+}
+
+fn lines(path: &Path) -> usize {
+    std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .lines()
+        .count()
+}
+
+/// Vertices of points.ply: x y z sx sy sz id observations.
+fn read_ply(path: &Path) -> Vec<Vec<String>> {
+    let t = std::fs::read_to_string(path).unwrap();
+    let (header, body) = t.split_once("end_header\n").unwrap();
+    let n: usize = header
+        .lines()
+        .find_map(|l| l.strip_prefix("element vertex "))
+        .unwrap()
+        .parse()
+        .unwrap();
+    let rows: Vec<Vec<String>> = body
+        .lines()
+        .map(|l| l.split(' ').map(String::from).collect())
+        .collect();
+    assert_eq!(rows.len(), n, "vertex count of {}", path.display());
+    assert!(rows.iter().all(|r| r.len() == 8));
+    rows
+}
+
+/// Left and right poses per epoch from eop.csv.
+fn read_eop(path: &Path) -> Vec<[Pose; 2]> {
+    let t = std::fs::read_to_string(path).unwrap();
+    let mut out: Vec<[Pose; 2]> = Vec::new();
+    for l in t.lines().skip(1) {
+        let f: Vec<&str> = l.split(',').collect();
+        let v = |i: usize| f[i].parse::<f64>().unwrap();
+        let pose = Pose::from_degrees(v(2), v(3), v(4), [v(5), v(6), v(7)]);
+        let epoch: usize = f[0].parse().unwrap();
+        if f[1] == "left" {
+            assert_eq!(epoch, out.len());
+            out.push([pose, pose]);
+        } else {
+            out[epoch][1] = pose;
+        }
+    }
+    out
+}
+
+#[test]
+fn run_writes_tie_points_efoto_and_the_residual_histogram() {
+    let t = tempfile::tempdir().unwrap();
+    let out = t.path().join("r");
+    let o = run(sequence(), &out, &["--link", "inproc"], &[]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert_eq!(lines(&out.join("poses.txt")), FRAMES);
+
+    let ply = read_ply(&out.join("points.ply"));
+    assert!(ply.len() > 100, "{} points", ply.len());
+    let enh = std::fs::read_to_string(out.join("efoto/points.txt")).unwrap();
+    let meas = std::fs::read_to_string(out.join("efoto/measurements.txt")).unwrap();
+    let images = std::fs::read_to_string(out.join("efoto/images.txt")).unwrap();
+    assert_eq!(enh.lines().count(), ply.len());
+    assert_eq!(images.lines().count(), 2 * FRAMES);
+    assert!(
+        images.starts_with("1\t000000.png\n2\t000000.png\n"),
+        "{images}"
+    );
+    // Every point has at least two measurements (it was intersected from a pair),
+    // and the PLY counts are the measurement lines of the E-Foto export.
+    let obs_total: usize = ply.iter().map(|r| r[7].parse::<usize>().unwrap()).sum();
+    assert_eq!(obs_total, meas.lines().count());
+    assert!(ply.iter().all(|r| r[7].parse::<usize>().unwrap() >= 2));
+    let ids: std::collections::BTreeSet<&str> = ply.iter().map(|r| r[6].as_str()).collect();
+    assert_eq!(ids.len(), ply.len(), "a track written twice");
+
+    // Consistency of ids, epochs, cameras and the pixel convention: each point
+    // projects through the epoch's reported pose onto its measurement.
+    let ds = Dataset::open(sequence()).unwrap();
+    let eop = read_eop(&out.join("eop.csv"));
+    let xyz: std::collections::BTreeMap<u32, [f64; 3]> = ply
+        .iter()
+        .map(|r| {
+            let v = |i: usize| r[i].parse::<f64>().unwrap();
+            (r[6].parse().unwrap(), [v(0), v(1), v(2)])
+        })
+        .collect();
+    let mut errors = Vec::new();
+    for l in meas.lines() {
+        let f: Vec<&str> = l.split('\t').collect();
+        let image: usize = f[0].parse().unwrap();
+        let (epoch, camera) = ((image - 1) / 2, (image - 1) % 2);
+        let p = xyz[&f[1].parse::<u32>().unwrap()];
+        let interior = if camera == 0 {
+            &ds.rig.left
+        } else {
+            &ds.rig.right
+        };
+        let px = project_to_pixel(&eop[epoch][camera], interior, &p).unwrap();
+        let (c, r): (f64, f64) = (f[2].parse().unwrap(), f[3].parse().unwrap());
+        assert!(
+            (0.0..640.0).contains(&c) && (0.0..480.0).contains(&r),
+            "{l}"
+        );
+        errors.push(((px[0] - c).powi(2) + (px[1] - r).powi(2)).sqrt());
+    }
+    errors.sort_by(|a, b| a.total_cmp(b));
+    let median = errors[errors.len() / 2];
+    let p90 = errors[errors.len() * 9 / 10];
+    assert!(
+        median < 0.5 && p90 < 2.0,
+        "reprojection median {median} px, p90 {p90} px"
+    );
+
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let residuals = report["residuals_px"].as_array().unwrap();
+    // One residual per final observation: at least the exported measurements.
+    assert!(
+        residuals.len() >= meas.lines().count(),
+        "{}",
+        residuals.len()
+    );
+    let mut r: Vec<f64> = residuals.iter().map(|v| v.as_f64().unwrap()).collect();
+    r.sort_by(|a, b| a.total_cmp(b));
+    assert!(
+        r[r.len() / 2] < 0.5,
+        "median residual {} px",
+        r[r.len() / 2]
+    );
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("Final image residuals"));
+
+    // Over a lossy, noisy link the reports are retransmitted, never lost or doubled:
+    // the same points, byte for byte.
+    let lossy = t.path().join("lossy");
+    let faults = [
+        "--link",
+        "inproc",
+        "--fault-drop",
+        "0.01",
+        "--fault-ber",
+        "1e-6",
+    ];
+    let o = run(sequence(), &lossy, &faults, &[]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(lossy.join("report.json")).unwrap()).unwrap();
+    assert!(report["link"]["retransmitted_packets"].as_u64().unwrap() > 0);
+    for f in ["points.ply", "efoto/measurements.txt"] {
+        assert_eq!(
+            std::fs::read(out.join(f)).unwrap(),
+            std::fs::read(lossy.join(f)).unwrap(),
+            "{f}"
+        );
+    }
+}
+
+#[test]
+fn missing_dataset_is_a_clear_error() {
+    let t = tempfile::tempdir().unwrap();
+    let missing = t.path().join("no-such-dataset");
+    let o = run(&missing, &t.path().join("r"), &["--link", "inproc"], &[]);
+    assert!(!o.status.success());
+    let e = text(&o.stderr);
+    assert!(
+        e.contains("no-such-dataset") && e.contains("cannot open the dataset"),
+        "{e}"
+    );
+}
+
+#[test]
+fn wrong_calibration_names_the_file_and_line() {
+    let t = tempfile::tempdir().unwrap();
+    let ds = copy_sequence(t.path());
+    let calib = ds.join("calib.txt");
+    let good = std::fs::read_to_string(&calib).unwrap();
+    let p1 = good.lines().nth(1).unwrap();
+    for (bad, what) in [
+        (
+            format!("{}\nP1: 500 0 x\n", good.lines().next().unwrap()),
+            "`x` is not a number",
+        ),
+        (
+            format!(
+                "{}\n{}\n",
+                good.lines().next().unwrap(),
+                p1.replacen("5e2", "0", 1)
+            ),
+            "non-positive focal length",
+        ),
+    ] {
+        std::fs::write(&calib, bad).unwrap();
+        let o = run(&ds, &t.path().join("r"), &["--link", "inproc"], &[]);
+        assert!(!o.status.success());
+        let e = text(&o.stderr);
+        assert!(
+            e.contains("calib.txt") && e.contains("line 2") && e.contains(what),
+            "{e}"
+        );
+    }
+}
+
+#[test]
+fn a_corrupt_image_costs_its_epoch_only() {
+    let t = tempfile::tempdir().unwrap();
+    let ds = copy_sequence(t.path());
+    std::fs::write(ds.join("image_0/000003.png"), vec![0x5Au8; 4000]).unwrap();
+    let out = t.path().join("r");
+    let o = run(&ds, &out, &["--link", "inproc"], &[]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let e = text(&o.stderr);
+    assert!(e.contains("epoch 3") && e.contains("000003.png"), "{e}");
+    assert_eq!(lines(&out.join("poses.txt")), FRAMES);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let epochs = report["epochs"].as_array().unwrap();
+    assert_eq!(epochs.len(), FRAMES);
+    assert_eq!(epochs[3]["status"], "predicted");
+    assert!(epochs[3]["note"]
+        .as_str()
+        .unwrap()
+        .contains("unreadable image"));
+    // The traverse goes on after it.
+    assert_eq!(epochs[FRAMES - 1]["status"], "ok");
+    assert!(read_ply(&out.join("points.ply")).len() > 50);
+}
+
+#[cfg(unix)]
+#[test]
+fn a_firmware_that_dies_keeps_the_poses_processed() {
+    use std::os::unix::fs::PermissionsExt;
+    let t = tempfile::tempdir().unwrap();
+    // A firmware that exits abruptly after ~3.5 epochs of input (640x480 pairs).
+    let script = t.path().join("dying-firmware.sh");
+    std::fs::write(
+        &script,
+        format!(
+            "#!/bin/sh\nexec '{}' firmware --die-after-bytes 2200000 \"$@\"\n",
+            env!("CARGO_BIN_EXE_phototraverse")
+        ),
+    )
+    .unwrap();
+    std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let out = t.path().join("r");
+    let o = run(
+        sequence(),
+        &out,
+        &["--link", "child"],
+        &[("PHOTOTRAVERSE_FIRMWARE", &script)],
+    );
+    assert!(!o.status.success());
+    let e = text(&o.stderr);
+    // Whichever end notices first: the host reading end of input, or writing
+    // into the dead process's pipe.
+    assert!(
+        e.contains("run stopped")
+            && (e.contains("the firmware closed the link") || e.contains("Broken pipe")),
+        "{e}"
+    );
+    assert_eq!(e.matches("link error over").count(), 1, "{e}");
+    assert!(
+        e.matches("closed the link").count() + e.matches("Broken pipe").count() == 1,
+        "the cause printed once: {e}"
+    );
+    let kept = lines(&out.join("poses.txt"));
+    assert!((1..FRAMES).contains(&kept), "{kept} poses kept");
+    assert!(
+        e.contains(&format!("the poses of the {kept} epochs processed")),
+        "{e}"
+    );
+    // The other outputs cover the same epochs.
+    assert_eq!(lines(&out.join("eop.csv")), 1 + 2 * kept);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["epochs"].as_array().unwrap().len(), kept);
+    assert!(out.join("report.html").is_file() && out.join("points.ply").is_file());
+}
+
+/// On the wire, each observation and each point is reported exactly once: the
+/// observations of epoch e when it is the oldest of a full window (after the
+/// result of epoch e + 7), the rest at the flush.
+#[test]
+fn the_firmware_reports_each_record_once() {
+    use phototraverse_core::protocol::messages::{points_flags, PixelFormat};
+    use phototraverse_host::link::LinkOptions;
+    use phototraverse_host::pipeline::PipelineSettings;
+    use phototraverse_host::session::{connect, EpochFrames};
+    use std::collections::BTreeSet;
+
+    let ds = Dataset::open(sequence()).unwrap();
+    let mut s = connect(&LinkOptions::default()).unwrap();
+    s.configure(&PipelineSettings::default().configure(&ds.rig))
+        .unwrap();
+    let (mut obs, mut points) = (BTreeSet::new(), BTreeSet::new());
+    let mut absorb = |msgs: &[phototraverse_core::protocol::messages::Points],
+                      epochs: &mut BTreeSet<u32>| {
+        for m in msgs {
+            for o in m.observations() {
+                assert!(obs.insert((o.track, o.epoch, o.camera)), "{o:?} twice");
+                epochs.insert(o.epoch);
+            }
+            for p in m.points() {
+                assert!(points.insert(p.track), "point {} twice", p.track);
+            }
+        }
+    };
+    for i in 0..ds.len() {
+        let (l, r) = ds.load_pair(i).unwrap();
+        s.send_epoch(&EpochFrames {
+            epoch: i as u32,
+            timestamp_us: (ds.epochs[i].time.unwrap() * 1e6) as u64,
+            width: l.width as u16,
+            height: l.height as u16,
+            format: PixelFormat::Gray8,
+            left: &l.data,
+            right: &r.data,
+            aux: None,
+        })
+        .unwrap();
+        s.finish().unwrap();
+        let msgs = s.pull_points(false).unwrap();
+        assert!(msgs.iter().all(|m| m.flags & points_flags::FLUSH == 0));
+        let mut epochs = BTreeSet::new();
+        absorb(&msgs, &mut epochs);
+        // Window of 8: after epoch i >= 7, epoch i - 7 leaves next.
+        let expected: BTreeSet<u32> = (i >= 7).then(|| (i - 7) as u32).into_iter().collect();
+        assert_eq!(epochs, expected, "after epoch {i}");
+    }
+    let msgs = s.pull_points(true).unwrap();
+    let mut epochs = BTreeSet::new();
+    absorb(&msgs, &mut epochs);
+    assert_eq!(epochs, (FRAMES as u32 - 7..FRAMES as u32).collect());
+    // A second flush finds nothing left.
+    let again = s.pull_points(true).unwrap();
+    assert_eq!(again.len(), 1);
+    assert_eq!((again[0].n_points, again[0].n_obs), (0, 0));
+    assert!(points.len() > 100 && obs.len() > 4 * points.len() / 2);
+}
