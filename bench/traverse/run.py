@@ -24,6 +24,8 @@ import subprocess
 import sys
 import time
 
+import steps
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))
 
@@ -128,6 +130,9 @@ def run_scene(binary, cache, scene, frames):
                          os.path.join(runs, "ours_eval.json"), os.path.join(runs, "ours_eval.log"))
     peer_eval = evaluate(binary, ds, os.path.join(peer_dir, "poses.txt"),
                          os.path.join(runs, "peer_eval.json"), os.path.join(runs, "peer_eval.log"))
+    gt = os.path.join(ds, "gt_poses.txt")
+    ours_steps = steps.summary(gt, os.path.join(ours_dir, "poses.txt"))
+    peer_steps = steps.summary(gt, os.path.join(peer_dir, "poses.txt"))
     with open(os.path.join(ours_dir, "report.json")) as f:
         report = json.load(f)
     with open(os.path.join(peer_dir, "peer.json")) as f:
@@ -156,6 +161,7 @@ def run_scene(binary, cache, scene, frames):
             "stereo_matches": median(e["stereo_matches"] for e in oe),
             "tie_points": median(e["tie_points"] for e in oe[1:]),
             "observations": median(e["observations"] for e in oe[1:]),
+            "steps": ours_steps,
         },
         "peer": {
             "translation_pct": peer_eval["translation_drift_pct"],
@@ -173,6 +179,7 @@ def run_scene(binary, cache, scene, frames):
             "stereo_matches": median(e["stereo_matches"] for e in pe),
             "temporal_matches": median(e.get("temporal_matches") for e in pe[1:]),
             "pnp_inliers": median(e.get("pnp_inliers") for e in pe[1:]),
+            "steps": peer_steps,
         },
         "synth_wall_s": synth_wall,
     }
@@ -229,6 +236,8 @@ def details(results):
             f"lost epochs {p['flagged']}; median keypoints/image {p['keypoints']:.0f}, "
             f"stereo matches {p['stereo_matches']:.0f}, temporal matches "
             f"{p['temporal_matches']:.0f}, PnP inliers {p['pnp_inliers']:.0f}",
+            f"  - step errors (steps.py; mean = bias, +- = spread): "
+            f"{steps.describe('ours', o['steps'])}; {steps.describe('peer', p['steps'])}",
         ]
     return "\n".join(lines)
 
