@@ -27,7 +27,7 @@ Timing per epoch excludes image decoding: wall time (time.perf_counter) and this
 time (time.thread_time), per stage and in total. Writes OUT/poses.txt and OUT/peer.json (per-epoch
 counts and stage times).
 
-usage: peer_vo.py DATASET --out DIR [--max-epochs N]
+usage: peer_vo.py DATASET --out DIR [--max-epochs N] [--nfeatures N] [--min-octave O]
 """
 import argparse
 import json
@@ -174,10 +174,31 @@ class StereoFrame:
         self.point_desc = point_desc  # their left descriptors
 
 
+def sift_octave(kp):
+    """Octave of an OpenCV SIFT keypoint: -1 is the doubled input image."""
+    o = kp.octave & 255
+    return o - 256 if o >= 128 else o
+
+
+class Features:
+    """cv2.SIFT with the benchmark's diagnostics: `min_octave = 0` drops the keypoints of the
+    doubled image (octave -1), emulating a SIFT that starts at input resolution."""
+
+    def __init__(self, nfeatures=0, min_octave=None):
+        self.sift = cv2.SIFT_create(nfeatures=nfeatures)
+        self.min_octave = min_octave
+
+    def __call__(self, img):
+        if self.min_octave is None:
+            return self.sift.detectAndCompute(img, None)
+        kp = [k for k in self.sift.detect(img, None) if sift_octave(k) >= self.min_octave]
+        return self.sift.compute(img, kp)
+
+
 def process_stereo(sift, matcher, P0, P1, left, right, watch, counts):
-    kl, dl = sift.detectAndCompute(left, None)
+    kl, dl = sift(left)
     watch.lap("sift_left")
-    kr, dr = sift.detectAndCompute(right, None)
+    kr, dr = sift(right)
     watch.lap("sift_right")
     matches = stereo_matches(matcher, kl, dl, kr, dr)
     watch.lap("stereo_match")
@@ -237,13 +258,13 @@ def check_rectified(P0, P1):
     return K0
 
 
-def run(dataset, out, max_epochs=None):
+def run(dataset, out, max_epochs=None, nfeatures=0, min_octave=None):
     cv2.setNumThreads(1)
     P0, P1, pairs = open_dataset(dataset)
     K = check_rectified(P0, P1)
     if max_epochs is not None:
         pairs = pairs[:max_epochs]
-    sift = cv2.SIFT_create()
+    sift = Features(nfeatures, min_octave)
     matcher = cv2.BFMatcher(cv2.NORM_L2)
     pose = np.eye(4)
     last_motion = np.eye(4)
@@ -276,7 +297,8 @@ def run(dataset, out, max_epochs=None):
         "peer": "OpenCV frame-to-frame stereo VO",
         "opencv": cv2.__version__,
         "settings": {"ratio": RATIO, "max_dy_px": MAX_DY_PX, "ransac_px": RANSAC_PX,
-                     "ransac_iterations": RANSAC_ITERATIONS, "sift": "cv2.SIFT_create() defaults",
+                     "ransac_iterations": RANSAC_ITERATIONS, "sift": f"cv2.SIFT_create(nfeatures={nfeatures})",
+                     "min_octave": min_octave,
                      "threads": 1},
         "epochs": epochs,
     }
@@ -298,9 +320,15 @@ def main():
     ap.add_argument("dataset")
     ap.add_argument("--out", required=True)
     ap.add_argument("--max-epochs", type=int)
+    ap.add_argument("--nfeatures", type=int, default=0,
+                    help="keep the N strongest SIFT features per image (diagnostics; default 0 = "
+                         "OpenCV's unlimited default)")
+    ap.add_argument("--min-octave", type=int,
+                    help="drop keypoints below this SIFT octave (diagnostics: 0 drops the doubled "
+                         "image's octave -1)")
     args = ap.parse_args()
     try:
-        summary = run(args.dataset, args.out, args.max_epochs)
+        summary = run(args.dataset, args.out, args.max_epochs, args.nfeatures, args.min_octave)
     except DatasetError as e:
         print(f"peer_vo: {e}", file=sys.stderr)
         return 2
