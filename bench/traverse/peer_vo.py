@@ -250,12 +250,14 @@ def motion(matcher, K, prev, cur, watch, counts):
 
 
 def check_rectified(P0, P1):
-    K0, K1 = P0[:, :3], P1[:, :3]
-    if not np.allclose(K0, K1, rtol=1e-9, atol=1e-9) or P0[:, 3].any() or P1[1:, 3].any():
-        raise DatasetError("calib.txt: P0/P1 are not a rectified pair (same K, base along x)")
-    if P1[0, 3] >= 0:
-        raise DatasetError("calib.txt: P1[0][3] must be negative (right camera at +x)")
-    return K0
+    """K of the left camera. The cameras may differ in K (a calibration with per-camera focal
+    length and principal point); triangulation uses P0 and P1 as they are. The layout must be
+    KITTI's: left camera at the origin, right camera along +x."""
+    if P0[:, 3].any():
+        raise DatasetError("calib.txt: P0 must be K [I | 0] (left camera at the origin)")
+    if P1[0, 3] >= 0 or P1[1:, 3].any():
+        raise DatasetError("calib.txt: P1 must have its base along +x (P1[0][3] < 0, P1[1..][3] = 0)")
+    return P0[:, :3]
 
 
 def run(dataset, out, max_epochs=None, nfeatures=0, min_octave=None):
