@@ -168,8 +168,9 @@ def triangulate(P0, P1, pl, pr):
 
 
 class StereoFrame:
-    def __init__(self, keypoints, descriptors, points, point_desc):
+    def __init__(self, keypoints, descriptors, points, point_desc, point_kp):
         self.keypoints = keypoints
+        self.point_kp = point_kp  # left keypoint index of each point
         self.descriptors = descriptors
         self.points = points  # triangulated points, left camera frame of this epoch
         self.point_desc = point_desc  # their left descriptors
@@ -218,10 +219,11 @@ def process_stereo(sift, matcher, P0, P1, left, right, watch, counts):
         idx = np.array([m.queryIdx for m in matches])[ok]
         points, point_desc = X[ok], dl[idx]
     else:
+        idx = np.zeros(0, int)
         points, point_desc = np.zeros((0, 3)), np.zeros((0, 128), np.float32)
     watch.lap("triangulate")
     counts["points"] = len(points)
-    return StereoFrame(kl, dl, points, point_desc)
+    return StereoFrame(kl, dl, points, point_desc, idx)
 
 
 def motion(matcher, K, prev, cur, watch, counts):
@@ -248,6 +250,10 @@ def motion(matcher, K, prev, cur, watch, counts):
     rvec, tvec = cv2.solvePnPRefineLM(obj[inl], img[inl], K, None, rvec, tvec)
     watch.lap("pnp")
     counts["pnp_inliers"] = len(inl)
+    # Diagnostics (untimed): inliers whose current left keypoint also has a stereo match, i.e.
+    # those that would survive a pipeline requiring quads (stereo at both epochs).
+    stereo_now = set(cur.point_kp.tolist())
+    counts["pnp_inlier_quads"] = sum(good[i].trainIdx in stereo_now for i in inl)
     T = np.eye(4)
     T[:3, :3] = cv2.Rodrigues(rvec)[0]
     T[:3, 3] = tvec.ravel()

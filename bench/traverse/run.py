@@ -179,6 +179,7 @@ def run_scene(binary, cache, scene, frames):
             "stereo_matches": median(e["stereo_matches"] for e in pe),
             "temporal_matches": median(e.get("temporal_matches") for e in pe[1:]),
             "pnp_inliers": median(e.get("pnp_inliers") for e in pe[1:]),
+            "pnp_inlier_quads": median(e.get("pnp_inlier_quads") for e in pe[1:]),
             "steps": peer_steps,
         },
         "synth_wall_s": synth_wall,
@@ -235,7 +236,9 @@ def details(results):
             f"process CPU {p['process_cpu_ms_per_epoch']:.1f} ms/epoch incl. decoding; ATE {p['ate_m']:.3f} m, final {p['final_pct']:.3f} %; "
             f"lost epochs {p['flagged']}; median keypoints/image {p['keypoints']:.0f}, "
             f"stereo matches {p['stereo_matches']:.0f}, temporal matches "
-            f"{p['temporal_matches']:.0f}, PnP inliers {p['pnp_inliers']:.0f}",
+            f"{p['temporal_matches']:.0f}, PnP inliers {p['pnp_inliers']:.0f} "
+            f"(of which quads, i.e. with a stereo match at the current epoch too: "
+            f"{p['pnp_inlier_quads']:.0f})",
             f"  - step errors (steps.py; mean = bias, +- = spread): "
             f"{steps.describe('ours', o['steps'])}; {steps.describe('peer', p['steps'])}",
         ]
