@@ -5,7 +5,7 @@ run: drift (KITTI-style segments, `phototraverse eval`) and time per epoch (medi
 sequence, per stage), with the ratios.
 
 usage: run.py CACHE [--scenes straight,curves,curves-real] [--frames 100] [--bin PATH]
-              [--results bench/traverse/RESULTS.md]
+              [--results bench/traverse/RESULTS.md] [--cpu-split]
 
 CACHE keeps the synthesized scenes (CACHE/<scene>-<frames>/, made once and reused) and the runs
 (CACHE/runs/<scene>-<frames>/{ours,peer}/ with the evaluation JSONs). Scenes are processed one at
@@ -109,7 +109,23 @@ def evaluate(binary, ds, poses, out_json, log):
         return json.load(f)
 
 
-def run_scene(binary, cache, scene, frames):
+def cpu_split(binary, ds, runs, frames, traverse_cpu):
+    """Our CPU per epoch split by running the same dataset with lighter firmware processors:
+    `stats` (decoding, link, framing: the host's share), `sift` (+ SIFT on both images); the
+    traverse's remainder is matching, initial values and adjustment. CPU time does not depend
+    on the machine's load, unlike the wall times of report.json."""
+    cpu = {}
+    for proc in ("stats", "sift"):
+        out = os.path.join(runs, f"ours_{proc}")
+        shutil.rmtree(out, ignore_errors=True)
+        _, c = run_timed([binary, "run", ds, "--out", out, "--link", "inproc", "--quiet",
+                          "--fw-processor", proc], os.path.join(runs, f"ours_{proc}.log"))
+        cpu[proc] = c * 1e3 / frames
+    return {"host_decode_link": cpu["stats"], "sift_both": cpu["sift"] - cpu["stats"],
+            "match_adjust_rest": traverse_cpu - cpu["sift"]}
+
+
+def run_scene(binary, cache, scene, frames, split=False):
     ds, synth_wall = synthesize(binary, cache, scene, frames)
     runs = os.path.join(cache, "runs", f"{scene}-{frames}")
     ours_dir, peer_dir = os.path.join(runs, "ours"), os.path.join(runs, "peer")
@@ -184,6 +200,10 @@ def run_scene(binary, cache, scene, frames):
         },
         "synth_wall_s": synth_wall,
     }
+    if split:
+        print(f"[{scene}] ours: CPU split (--fw-processor stats, sift) ...", flush=True)
+        result["ours"]["cpu_split_ms"] = cpu_split(
+            binary, ds, runs, len(oe), result["ours"]["process_cpu_ms_per_epoch"])
     with open(os.path.join(runs, "result.json"), "w") as f:
         json.dump(result, f, indent=1)
     return result
@@ -239,6 +259,8 @@ def details(results):
             f"{p['temporal_matches']:.0f}, PnP inliers {p['pnp_inliers']:.0f} "
             f"(of which quads, i.e. with a stereo match at the current epoch too: "
             f"{p['pnp_inlier_quads']:.0f})",
+            *([f"  - ours, CPU ms per epoch split (runs with --fw-processor stats and sift): "
+               f"{fmt_stages(o['cpu_split_ms'])}"] if "cpu_split_ms" in o else []),
             f"  - step errors (steps.py; mean = bias, +- = spread): "
             f"{steps.describe('ours', o['steps'])}; {steps.describe('peer', p['steps'])}",
         ]
@@ -286,6 +308,8 @@ def main():
     ap.add_argument("--scenes", default="straight,curves,curves-real",
                     help=f"comma-separated, from {', '.join(SCENES)}")
     ap.add_argument("--frames", type=int, default=100)
+    ap.add_argument("--cpu-split", action="store_true",
+                    help="also split our CPU per epoch into host, SIFT and the rest (2 more runs)")
     ap.add_argument("--bin", default=os.path.join(REPO, "target", "release", "phototraverse"))
     ap.add_argument("--results", default=os.path.join(HERE, "RESULTS.md"),
                     help="markdown file written with the table ('-' to skip)")
@@ -299,7 +323,7 @@ def main():
     before = uptime()
     results = []
     for scene in scenes:
-        r = run_scene(args.bin, args.cache, scene, args.frames)
+        r = run_scene(args.bin, args.cache, scene, args.frames, args.cpu_split)
         results.append(r)
         o, p = r["ours"], r["peer"]
         print(f"[{scene}] ours {o['translation_pct']:.3f} % {o['rotation_deg_per_m']:.4f} deg/m "
