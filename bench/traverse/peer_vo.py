@@ -28,7 +28,7 @@ time (time.thread_time), per stage and in total. Writes OUT/poses.txt and OUT/pe
 counts and stage times).
 
 usage: peer_vo.py DATASET --out DIR [--max-epochs N] [--nfeatures N] [--min-octave O]
-                  [--precise-upscale]
+                  [--precise-upscale] [--rows A:B]
 """
 import argparse
 import json
@@ -186,7 +186,8 @@ class Features:
     """cv2.SIFT with the benchmark's diagnostics: `min_octave = 0` drops the keypoints of the
     doubled image (octave -1), emulating a SIFT that starts at input resolution."""
 
-    def __init__(self, nfeatures=0, min_octave=None, precise_upscale=False):
+    def __init__(self, nfeatures=0, min_octave=None, precise_upscale=False, rows=None):
+        self.rows = rows  # (first, end): keep keypoints with first <= y < end (diagnostics)
         if precise_upscale:
             # OpenCV >= 4.8: doubles the image without the quarter-pixel shift of the default.
             self.sift = cv2.SIFT_create(nfeatures=nfeatures, enable_precise_upscale=True)
@@ -194,10 +195,15 @@ class Features:
             self.sift = cv2.SIFT_create(nfeatures=nfeatures)
         self.min_octave = min_octave
 
+    def keep(self, k):
+        if self.min_octave is not None and sift_octave(k) < self.min_octave:
+            return False
+        return self.rows is None or self.rows[0] <= k.pt[1] < self.rows[1]
+
     def __call__(self, img):
-        if self.min_octave is None:
+        if self.min_octave is None and self.rows is None:
             return self.sift.detectAndCompute(img, None)
-        kp = [k for k in self.sift.detect(img, None) if sift_octave(k) >= self.min_octave]
+        kp = [k for k in self.sift.detect(img, None) if self.keep(k)]
         return self.sift.compute(img, kp)
 
 
@@ -271,13 +277,14 @@ def check_rectified(P0, P1):
     return P0[:, :3]
 
 
-def run(dataset, out, max_epochs=None, nfeatures=0, min_octave=None, precise_upscale=False):
+def run(dataset, out, max_epochs=None, nfeatures=0, min_octave=None, precise_upscale=False,
+        rows=None):
     cv2.setNumThreads(1)
     P0, P1, pairs = open_dataset(dataset)
     K = check_rectified(P0, P1)
     if max_epochs is not None:
         pairs = pairs[:max_epochs]
-    sift = Features(nfeatures, min_octave, precise_upscale)
+    sift = Features(nfeatures, min_octave, precise_upscale, rows)
     matcher = cv2.BFMatcher(cv2.NORM_L2)
     pose = np.eye(4)
     last_motion = np.eye(4)
@@ -312,6 +319,7 @@ def run(dataset, out, max_epochs=None, nfeatures=0, min_octave=None, precise_ups
         "settings": {"ratio": RATIO, "max_dy_px": MAX_DY_PX, "ransac_px": RANSAC_PX,
                      "ransac_iterations": RANSAC_ITERATIONS, "sift": f"cv2.SIFT_create(nfeatures={nfeatures})",
                      "min_octave": min_octave, "precise_upscale": precise_upscale,
+                     "rows": rows,
                      "threads": 1},
         "epochs": epochs,
     }
@@ -341,10 +349,15 @@ def main():
                          "image's octave -1)")
     ap.add_argument("--precise-upscale", action="store_true",
                     help="cv2.SIFT_create(enable_precise_upscale=True) (diagnostics)")
+    ap.add_argument("--rows", help="FIRST:END: keep keypoints in these image rows only "
+                                   "(diagnostics, e.g. 0:240 = above the horizon)")
     args = ap.parse_args()
+    rows = tuple(float(v) for v in args.rows.split(":")) if args.rows else None
+    if rows is not None and len(rows) != 2:
+        ap.error("--rows FIRST:END")
     try:
         summary = run(args.dataset, args.out, args.max_epochs, args.nfeatures, args.min_octave,
-                      args.precise_upscale)
+                      args.precise_upscale, rows)
     except DatasetError as e:
         print(f"peer_vo: {e}", file=sys.stderr)
         return 2
