@@ -18,7 +18,7 @@ Per epoch k (one thread, cv2.setNumThreads(1)):
 If the PnP fails (fewer than 6 matches or inliers), the previous motion is repeated and the epoch
 is flagged "lost".
 
-Only the KITTI layout is read (calib.txt P0/P1, image_0/, image_1/, optional times.txt): the
+Only the KITTI layout is read (calib.txt P0/P1, image_0/, image_1/; times.txt is not needed): the
 peer relies on rectified images. rig.toml datasets (lens distortion, converging cameras) would
 need an undistortion/rectification step that is not part of a plain odometry, so they are
 refused with a clear message.
