@@ -102,6 +102,10 @@ pub struct AdjustConfig {
     pub robust: Robust,
     /// Convergence: relative decrease of `vTPv` below this stops the iterations.
     pub tolerance: f64,
+    /// Sliding-window mode of [`Robust::Snooping`]: exclusions found by earlier solves
+    /// stay as the starting set (snooping may readmit them) and the Cauchy rounds are
+    /// skipped, so an epoch only pays for the blunders its own observations bring.
+    pub keep_exclusions: bool,
 }
 
 impl Default for AdjustConfig {
@@ -116,6 +120,7 @@ impl Default for AdjustConfig {
             sigmas: ConstraintSigmas::default(),
             robust: Robust::snooping(),
             tolerance: 1e-12,
+            keep_exclusions: false,
         }
     }
 }
@@ -1528,9 +1533,12 @@ impl<'a> Window<'a> {
         }
         self.singular_epoch = None;
         self.build_index();
-        for o in self.obs[..self.n_obs].iter_mut() {
-            o.factor = 1.0;
-            o.flags = 0;
+        let keep = self.cfg.keep_exclusions && matches!(self.cfg.robust, Robust::Snooping { .. });
+        if !keep {
+            for o in self.obs[..self.n_obs].iter_mut() {
+                o.factor = 1.0;
+                o.flags = 0;
+            }
         }
         for p in self.points[..self.n_point_slots].iter_mut() {
             p.flags &= !PT_EXCLUDED;
@@ -1564,7 +1572,11 @@ impl<'a> Window<'a> {
                 let (it, conv) = self.least_squares(max_it)?;
                 report.iterations += it;
                 report.converged = conv;
-                if !self.detection_passes()? {
+                if self.detection_passes()? {
+                    // Accepted as is.
+                } else if keep {
+                    self.snoop_rounds(critical, 1, &mut report)?;
+                } else {
                     self.identify(critical, &mut report)?;
                 }
             }
@@ -1592,25 +1604,38 @@ impl<'a> Window<'a> {
                 for o in self.obs[..self.n_obs].iter_mut() {
                     o.factor = 1.0;
                 }
-                self.snoop(critical, 0);
-                let mut stable = false;
-                for round in 1..=self.cfg.max_robust_rounds {
-                    let (it, conv) = self.least_squares(max_it)?;
-                    report.iterations += it;
-                    report.converged = conv;
-                    report.robust_rounds += 1;
-                    if !self.snoop(critical, round) {
-                        stable = true;
-                        break;
-                    }
-                }
-                if !stable {
-                    // Out of rounds: the solution must match the final set.
-                    let (it, conv) = self.least_squares(max_it)?;
-                    report.iterations += it;
-                    report.converged = conv;
-                }
+                self.snoop_rounds(critical, 0, report)?;
             }
+        }
+        Ok(())
+    }
+
+    /// Snooping from the current solution until the excluded set is stable, then
+    /// a final solution for that set. `first_round` 1 skips the hysteresis-free start.
+    fn snoop_rounds(
+        &mut self,
+        critical: f64,
+        first_round: usize,
+        report: &mut Report,
+    ) -> Result<(), AdjustError> {
+        let max_it = self.cfg.max_iterations;
+        self.snoop(critical, first_round);
+        let mut stable = false;
+        for round in first_round + 1..=first_round + self.cfg.max_robust_rounds {
+            let (it, conv) = self.least_squares(max_it)?;
+            report.iterations += it;
+            report.converged = conv;
+            report.robust_rounds += 1;
+            if !self.snoop(critical, round) {
+                stable = true;
+                break;
+            }
+        }
+        if !stable {
+            // Out of rounds: the solution must match the final set.
+            let (it, conv) = self.least_squares(max_it)?;
+            report.iterations += it;
+            report.converged = conv;
         }
         Ok(())
     }
@@ -1651,18 +1676,22 @@ impl<'a> Window<'a> {
     /// the excluded set changed.
     fn snoop(&mut self, critical: f64, round: usize) -> bool {
         self.statistics();
-        let n = self.n_obs;
+        let scale2 = self.median_scale();
+        self.apply_flags(critical, round, scale2)
+    }
+
+    /// Median of the accepted observations' `T` (in `residuals`) over chi2_2's median:
+    /// 1 when the weights match the noise, and right also with the seed's weights
+    /// whose scale is arbitrary.
+    fn median_scale(&mut self) -> f64 {
         let mut m = 0;
-        for i in 0..n {
+        for i in 0..self.n_obs {
             if self.obs[i].factor > 0.0 && self.residuals[i].is_finite() {
                 self.work[m] = self.residuals[i];
                 m += 1;
             }
         }
-        // Median scale: 1 when the weights match the noise, and right also
-        // with the seed's weights whose scale is arbitrary.
-        let scale2 = (median(&mut self.work[..m]) / CHI2_2_MEDIAN).max(1e-30);
-        self.apply_flags(critical, round, scale2)
+        (median(&mut self.work[..m]) / CHI2_2_MEDIAN).max(1e-30)
     }
 
     /// Detection (Baarda's DIA order): after plain least squares, the data are
@@ -1672,16 +1701,23 @@ impl<'a> Window<'a> {
     fn detection_passes(&mut self) -> Result<bool, AdjustError> {
         let mut r = Report::default();
         self.quality(&mut r)?;
-        if !r.chi2.passed {
+        // Only the upper tail is evidence of blunders; a sigma0 below its bound says
+        // the a-priori sigma was pessimistic, and identification would be wasted work.
+        if r.chi2.statistic > r.chi2.upper {
             return Ok(false);
         }
         self.statistics();
+        let scale2 = self.median_scale();
         let n = self.n_obs.max(1) as f64;
         let bound = -2.0 * libm::log(0.05 / n);
         let worst = self.residuals[..self.n_obs]
             .iter()
-            .fold(0.0f64, |m, t| m.max(*t));
-        Ok(worst <= bound)
+            .enumerate()
+            .filter(|(i, _)| self.obs[*i].factor > 0.0)
+            .fold(0.0f64, |m, (_, t)| m.max(*t));
+        // On the median scale, as snooping: a pessimistic a-priori sigma must not
+        // hide blunders that stand out of the actual noise.
+        Ok(worst <= bound * scale2)
     }
 
     /// `T` of every observation into `residuals` (a-priori scale).

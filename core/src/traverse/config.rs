@@ -3,10 +3,11 @@ use crate::adjust::{AdjustConfig, ConstraintSigmas, Correspondence, ResectionCon
 use crate::budget::{slice_bytes, ComponentKind, MemoryBudget};
 use crate::camera::{Pose, Rig};
 use crate::features::FeatureSet;
-use crate::matching::{MatchConfig, StereoGeometry};
+use crate::matching::{MatchConfig, RefineConfig, StereoGeometry};
 use crate::sift::SiftConfig;
 
-use super::TrackPoint;
+use super::patches::Patches;
+use super::{Refined, TrackPoint};
 
 /// Everything the traverse needs before the first frame: the rig, the datum, the
 /// stages' configurations and capacities.
@@ -30,6 +31,9 @@ pub struct TraverseConfig {
     /// Prior standard deviations (angles rad, positions m) tying an epoch that the images
     /// do not determine (lost track) to its motion prediction.
     pub prediction_sigmas: [f64; 6],
+    /// Refine each tie point's current left position against the previous epoch's
+    /// template (needs `matching.refine`; see `traverse::patches`).
+    pub temporal_refine: bool,
 }
 
 impl TraverseConfig {
@@ -59,6 +63,10 @@ impl TraverseConfig {
                 max_depth_m: f64::INFINITY,
             };
         }
+        matching.refine = Some(RefineConfig {
+            rows_only: matches!(matching.stereo, StereoGeometry::Rectified { .. }),
+            ..RefineConfig::default()
+        });
         matching.max_tie_points = 400;
         matching.max_tracks = 600;
         let window = 8;
@@ -75,7 +83,10 @@ impl TraverseConfig {
                 velocity_change_mps: 0.5,
                 ..ConstraintSigmas::default()
             },
-            tolerance: 1e-10,
+            // Each epoch starts from the last solution: a relative decrease of 1e-6
+            // moves the poses by far less than their sigma.
+            tolerance: 1e-6,
+            keep_exclusions: true,
             ..AdjustConfig::default()
         };
         TraverseConfig {
@@ -88,8 +99,11 @@ impl TraverseConfig {
             sigma_px: 0.5,
             min_tie_points: 12,
             min_ray_angle_rad: 0.05f64.to_radians(),
-            max_depth_m: 200.0,
+            // Far points carry the attitude; only points at practically infinite
+            // distance (where the ray angle test already refuses them) are left out.
+            max_depth_m: 1000.0,
             prediction_sigmas: [0.01, 0.01, 0.01, 0.3, 0.3, 0.3],
+            temporal_refine: true,
         }
     }
 
@@ -142,12 +156,27 @@ impl TraverseConfig {
             ComponentKind::Storage,
             slice_bytes::<TrackPoint>(self.matching.max_tracks),
         );
+        if let Some((cap, half)) = self.patch_capacity() {
+            Patches::budget(cap, half, budget);
+            budget.add(
+                "traverse.refined",
+                ComponentKind::Working,
+                slice_bytes::<Refined>(self.matching.max_tie_points),
+            );
+        }
         budget.add(
             "traverse.correspondences",
             ComponentKind::Working,
             slice_bytes::<Correspondence>(self.matching.max_tie_points),
         );
         Ok(())
+    }
+
+    /// Templates kept for the temporal refinement (capacity, half-size), if it is on.
+    pub fn patch_capacity(&self) -> Option<(usize, usize)> {
+        let r = self.matching.refine.as_ref()?;
+        self.temporal_refine
+            .then_some((self.matching.max_tie_points, r.half_window as usize))
     }
 
     /// Total bytes of the budget (frames excluded).
