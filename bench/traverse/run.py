@@ -1,0 +1,345 @@
+#!/usr/bin/env python3
+"""Traverse benchmark: phototraverse (`run --link inproc`, release binary) against a plain
+OpenCV frame-to-frame stereo odometry (peer_vo.py) on the same synthetic sequences, in the same
+run: drift (KITTI-style segments, `phototraverse eval`) and time per epoch (median over the
+sequence, per stage), with the ratios.
+
+usage: run.py CACHE [--scenes straight,curves,curves-real] [--frames 100] [--bin PATH]
+              [--results bench/traverse/RESULTS.md] [--cpu-split]
+
+CACHE keeps the synthesized scenes (CACHE/<scene>-<frames>/, made once and reused) and the runs
+(CACHE/runs/<scene>-<frames>/{ours,peer}/ with the evaluation JSONs). Scenes are processed one at
+a time (the machine is shared); ours and the peer run one after the other on the same data.
+The binary defaults to target/release/phototraverse of this repository
+(`cargo build --release -p phototraverse-host`).
+"""
+import argparse
+import datetime
+import json
+import os
+import platform
+import resource
+import shutil
+import subprocess
+import sys
+import time
+
+import steps
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(os.path.dirname(HERE))
+
+# name -> synth arguments (scene and options); frames are appended.
+SCENES = {
+    "straight": ["--scene", "straight"],
+    "curves": ["--scene", "curves"],
+    # Issue 7's calibration-residual case: --realistic = blur 0.6, vignetting 0.25, flicker
+    # 0.05, noise 1.5, JPEG 90 and calib base=0.003,focal=0.003,pp_px=1,rel_deg=0.05.
+    "curves-real": ["--scene", "curves", "--realistic"],
+    "hard": ["--scene", "hard"],
+}
+# Stage order of the table; stages missing on one side are shown as "-".
+OUR_STAGES = ["sift_left", "sift_right", "stereo_match", "assemble", "initial_values", "adjust"]
+PEER_STAGES = ["sift_left", "sift_right", "stereo_match", "triangulate", "temporal_match", "pnp"]
+
+
+def median(values):
+    v = sorted(x for x in values if x is not None)
+    if not v:
+        return float("nan")
+    n = len(v)
+    return v[n // 2] if n % 2 else 0.5 * (v[n // 2 - 1] + v[n // 2])
+
+
+def uptime():
+    try:
+        return subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
+    except OSError:
+        with open("/proc/loadavg") as f:
+            return "load average " + " ".join(f.read().split()[:3])
+
+
+def cpu_model():
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def run_timed(cmd, log):
+    """Run cmd; returns (wall s, children's CPU s). Fails loudly with the log's tail."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    with open(log, "w") as f:
+        rc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT).returncode
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    if rc != 0:
+        with open(log) as f:
+            tail = f.read()[-2000:]
+        raise RuntimeError(f"{' '.join(cmd)} failed ({rc}):\n{tail}")
+    return wall, cpu
+
+
+def synthesize(binary, cache, scene, frames):
+    """The scene's dataset, synthesized once: a finished dataset has synth.json."""
+    ds = os.path.join(cache, f"{scene}-{frames}")
+    if os.path.exists(os.path.join(ds, "synth.json")):
+        return ds, None
+    tmp = ds + ".partial"
+    shutil.rmtree(tmp, ignore_errors=True)
+    os.makedirs(cache, exist_ok=True)
+    cmd = [binary, "synth", *SCENES[scene], "--frames", str(frames), "--out", tmp]
+    print(f"[{scene}] synthesizing {frames} frames ...", flush=True)
+    wall, _ = run_timed(cmd, tmp + ".log")
+    shutil.rmtree(ds, ignore_errors=True)
+    os.rename(tmp, ds)
+    os.replace(tmp + ".log", os.path.join(ds, "synth.log"))
+    return ds, wall
+
+
+def evaluate(binary, ds, poses, out_json, log):
+    run_timed([binary, "eval", os.path.join(ds, "gt_poses.txt"), poses, "--json", out_json], log)
+    with open(out_json) as f:
+        return json.load(f)
+
+
+def cpu_split(binary, ds, runs, frames, traverse_cpu):
+    """Our CPU per epoch split by running the same dataset with lighter firmware processors:
+    `stats` (decoding, link, framing: the host's share), `sift` (+ SIFT on both images); the
+    traverse's remainder is matching, initial values and adjustment. CPU time does not depend
+    on the machine's load, unlike the wall times of report.json."""
+    cpu = {}
+    for proc in ("stats", "sift"):
+        out = os.path.join(runs, f"ours_{proc}")
+        shutil.rmtree(out, ignore_errors=True)
+        _, c = run_timed([binary, "run", ds, "--out", out, "--link", "inproc", "--quiet",
+                          "--fw-processor", proc], os.path.join(runs, f"ours_{proc}.log"))
+        cpu[proc] = c * 1e3 / frames
+    return {"host_decode_link": cpu["stats"], "sift_both": cpu["sift"] - cpu["stats"],
+            "match_adjust_rest": traverse_cpu - cpu["sift"]}
+
+
+def run_scene(binary, cache, scene, frames, split=False):
+    ds, synth_wall = synthesize(binary, cache, scene, frames)
+    runs = os.path.join(cache, "runs", f"{scene}-{frames}")
+    ours_dir, peer_dir = os.path.join(runs, "ours"), os.path.join(runs, "peer")
+    for d in (ours_dir, peer_dir):
+        shutil.rmtree(d, ignore_errors=True)
+    os.makedirs(runs, exist_ok=True)
+
+    print(f"[{scene}] ours: phototraverse run --link inproc ...", flush=True)
+    ours_wall, ours_cpu = run_timed(
+        [binary, "run", ds, "--out", ours_dir, "--link", "inproc", "--quiet"],
+        os.path.join(runs, "ours.log"))
+    print(f"[{scene}] peer: peer_vo.py ...", flush=True)
+    peer_wall, peer_cpu = run_timed(
+        [sys.executable, os.path.join(HERE, "peer_vo.py"), ds, "--out", peer_dir],
+        os.path.join(runs, "peer.log"))
+
+    ours_eval = evaluate(binary, ds, os.path.join(ours_dir, "poses.txt"),
+                         os.path.join(runs, "ours_eval.json"), os.path.join(runs, "ours_eval.log"))
+    peer_eval = evaluate(binary, ds, os.path.join(peer_dir, "poses.txt"),
+                         os.path.join(runs, "peer_eval.json"), os.path.join(runs, "peer_eval.log"))
+    gt = os.path.join(ds, "gt_poses.txt")
+    ours_steps = steps.summary(gt, os.path.join(ours_dir, "poses.txt"))
+    peer_steps = steps.summary(gt, os.path.join(peer_dir, "poses.txt"))
+    with open(os.path.join(ours_dir, "report.json")) as f:
+        report = json.load(f)
+    with open(os.path.join(peer_dir, "peer.json")) as f:
+        peer = json.load(f)
+
+    oe, pe = report["epochs"], peer["epochs"]
+    # Timing medians skip epoch 0 (bootstrap: no temporal matching or adjustment on either side).
+    o_t, p_t = oe[1:] or oe, pe[1:] or pe
+    result = {
+        "scene": scene,
+        "frames": len(oe),
+        "synth": SCENES[scene],
+        "dataset": ds,
+        "path_length_m": ours_eval.get("path_length_m"),
+        "ours": {
+            "translation_pct": ours_eval["translation_drift_pct"],
+            "rotation_deg_per_m": ours_eval["rotation_drift_deg_per_m"],
+            "ate_m": ours_eval["ate_rmse_m"],
+            "final_pct": ours_eval["final_position_error_pct"],
+            "ms": median(e["stage_ms"].get("total") for e in o_t),
+            "stage_ms": {s: median(e["stage_ms"].get(s) for e in o_t) for s in OUR_STAGES},
+            "process_cpu_ms_per_epoch": ours_cpu * 1e3 / len(oe),
+            "process_wall_s": ours_wall,
+            "flagged": sum(e["status"] != "ok" for e in oe),
+            "keypoints": median(sum(e["keypoints"]) / 2 for e in oe),
+            "stereo_matches": median(e["stereo_matches"] for e in oe),
+            "tie_points": median(e["tie_points"] for e in oe[1:]),
+            "observations": median(e["observations"] for e in oe[1:]),
+            "steps": ours_steps,
+        },
+        "peer": {
+            "translation_pct": peer_eval["translation_drift_pct"],
+            "rotation_deg_per_m": peer_eval["rotation_drift_deg_per_m"],
+            "ate_m": peer_eval["ate_rmse_m"],
+            "final_pct": peer_eval["final_position_error_pct"],
+            "ms": median(e["stage_ms"]["total"] for e in p_t),
+            "cpu_ms": median(e["stage_cpu_ms"]["total"] for e in p_t),
+            "stage_ms": {s: median(e["stage_ms"].get(s) for e in p_t) for s in PEER_STAGES},
+            "stage_cpu_ms": {s: median(e["stage_cpu_ms"].get(s) for e in p_t) for s in PEER_STAGES},
+            "process_cpu_ms_per_epoch": peer_cpu * 1e3 / len(pe),
+            "process_wall_s": peer_wall,
+            "flagged": sum(e["status"] != "ok" for e in pe),
+            "keypoints": median(sum(e["keypoints"]) / 2 for e in pe),
+            "stereo_matches": median(e["stereo_matches"] for e in pe),
+            "temporal_matches": median(e.get("temporal_matches") for e in pe[1:]),
+            "pnp_inliers": median(e.get("pnp_inliers") for e in pe[1:]),
+            "pnp_inlier_quads": median(e.get("pnp_inlier_quads") for e in pe[1:]),
+            "steps": peer_steps,
+        },
+        "synth_wall_s": synth_wall,
+    }
+    if split:
+        print(f"[{scene}] ours: CPU split (--fw-processor stats, sift) ...", flush=True)
+        result["ours"]["cpu_split_ms"] = cpu_split(
+            binary, ds, runs, len(oe), result["ours"]["process_cpu_ms_per_epoch"])
+    with open(os.path.join(runs, "result.json"), "w") as f:
+        json.dump(result, f, indent=1)
+    return result
+
+
+def ratio(a, b):
+    return a / b if b else float("inf")
+
+
+def fmt_stages(stages):
+    return ", ".join(f"{k} {v:.1f}" for k, v in stages.items())
+
+
+def table(results):
+    """Markdown table: drift, time, ratios ours/peer (below 1: ours is better/faster)."""
+    lines = [
+        "| scene | frames | ours drift % | ours deg/m | ours ms/epoch wall (CPU) | peer drift % "
+        "| peer deg/m | peer ms/epoch wall (CPU) | drift ours/peer | deg/m ours/peer "
+        "| wall ours/peer | CPU ours/peer |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in results:
+        o, p = r["ours"], r["peer"]
+        oc, pc = o["process_cpu_ms_per_epoch"], p["process_cpu_ms_per_epoch"]
+        lines.append(
+            f"| {r['scene']} | {r['frames']} | {o['translation_pct']:.3f} | "
+            f"{o['rotation_deg_per_m']:.4f} | {o['ms']:.1f} ({oc:.1f}) | "
+            f"{p['translation_pct']:.3f} | {p['rotation_deg_per_m']:.4f} | "
+            f"{p['ms']:.1f} ({pc:.1f}) | "
+            f"{ratio(o['translation_pct'], p['translation_pct']):.2f} | "
+            f"{ratio(o['rotation_deg_per_m'], p['rotation_deg_per_m']):.2f} | "
+            f"{ratio(o['ms'], p['ms']):.2f} | {ratio(oc, pc):.2f} |")
+    return "\n".join(lines)
+
+
+def details(results):
+    lines = []
+    for r in results:
+        o, p = r["ours"], r["peer"]
+        lines += [
+            f"- **{r['scene']}** (`phototraverse synth {' '.join(r['synth'])} --frames {r['frames']}`, "
+            f"{r['path_length_m']:.1f} m):",
+            f"  - ours: median stage ms (wall, in the firmware): {fmt_stages(o['stage_ms'])}; "
+            f"process CPU {o['process_cpu_ms_per_epoch']:.1f} ms/epoch incl. decoding and link; "
+            f"ATE {o['ate_m']:.3f} m, final {o['final_pct']:.3f} %; flagged epochs {o['flagged']}; "
+            f"median keypoints/image {o['keypoints']:.0f}, stereo matches {o['stereo_matches']:.0f}, "
+            f"tie points {o['tie_points']:.0f}, observations {o['observations']:.0f}",
+            f"  - peer: median stage ms wall: {fmt_stages(p['stage_ms'])}; thread CPU: "
+            f"{fmt_stages(p['stage_cpu_ms'])}, total {p['cpu_ms']:.1f} (excl. decoding); "
+            f"process CPU {p['process_cpu_ms_per_epoch']:.1f} ms/epoch incl. decoding; ATE {p['ate_m']:.3f} m, final {p['final_pct']:.3f} %; "
+            f"lost epochs {p['flagged']}; median keypoints/image {p['keypoints']:.0f}, "
+            f"stereo matches {p['stereo_matches']:.0f}, temporal matches "
+            f"{p['temporal_matches']:.0f}, PnP inliers {p['pnp_inliers']:.0f} "
+            f"(of which quads, i.e. with a stereo match at the current epoch too: "
+            f"{p['pnp_inlier_quads']:.0f})",
+            *([f"  - ours, CPU ms per epoch split (runs with --fw-processor stats and sift): "
+               f"{fmt_stages(o['cpu_split_ms'])}"] if "cpu_split_ms" in o else []),
+            f"  - step errors (steps.py; mean = bias, +- = spread): "
+            f"{steps.describe('ours', o['steps'])}; {steps.describe('peer', p['steps'])}",
+        ]
+    return "\n".join(lines)
+
+
+def git_commit():
+    try:
+        return subprocess.run(["git", "-C", REPO, "rev-parse", "--short", "HEAD"],
+                              capture_output=True, text=True).stdout.strip()
+    except OSError:
+        return "unknown"
+
+
+def write_results(path, results, before, after, binary, argv):
+    now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    text = f"""# Traverse benchmark: phototraverse against an OpenCV stereo odometry
+
+Written by `python3 bench/traverse/run.py {' '.join(argv)}` on {now}, commit {git_commit()},
+binary `{binary}`.
+Machine: {cpu_model()}, {os.cpu_count()} cores (shared).
+Load before: `{before}`
+Load after: `{after}`
+
+Drift: KITTI-style segments (`phototraverse eval`). Time "wall": median over epochs 1.. of the
+wall time per epoch excluding image decoding (ours: `stage_ms.total` of report.json, measured in
+the firmware; peer: `time.perf_counter` around its stages). Wall times grow with the machine's
+load (2 cores shared by several jobs), so the table also gives "CPU": the CPU time of the whole
+process (getrusage of the child: decoding, link and start-up included, on both sides alike)
+divided by the number of epochs, which load barely changes. Both sides run one after the other
+in the same invocation on the same data, one thread each (ours: the in-process firmware; peer:
+cv2.setNumThreads(1)). Ratios are ours / peer: below 1, ours is better or faster.
+
+{table(results)}
+
+{details(results)}
+"""
+    with open(path, "w") as f:
+        f.write(text)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("cache", help="directory of synthesized scenes and runs (reused)")
+    ap.add_argument("--scenes", default="straight,curves,curves-real",
+                    help=f"comma-separated, from {', '.join(SCENES)}")
+    ap.add_argument("--frames", type=int, default=100)
+    ap.add_argument("--cpu-split", action="store_true",
+                    help="also split our CPU per epoch into host, SIFT and the rest (2 more runs)")
+    ap.add_argument("--bin", default=os.path.join(REPO, "target", "release", "phototraverse"))
+    ap.add_argument("--results", default=os.path.join(HERE, "RESULTS.md"),
+                    help="markdown file written with the table ('-' to skip)")
+    args = ap.parse_args()
+    scenes = [s for s in args.scenes.split(",") if s]
+    unknown = [s for s in scenes if s not in SCENES]
+    if unknown:
+        ap.error(f"unknown scene(s) {', '.join(unknown)}; known: {', '.join(SCENES)}")
+    if not os.access(args.bin, os.X_OK):
+        ap.error(f"{args.bin}: no binary (cargo build --release -p phototraverse-host)")
+    before = uptime()
+    results = []
+    for scene in scenes:
+        r = run_scene(args.bin, args.cache, scene, args.frames, args.cpu_split)
+        results.append(r)
+        o, p = r["ours"], r["peer"]
+        print(f"[{scene}] ours {o['translation_pct']:.3f} % {o['rotation_deg_per_m']:.4f} deg/m "
+              f"{o['ms']:.1f} ms | peer {p['translation_pct']:.3f} % "
+              f"{p['rotation_deg_per_m']:.4f} deg/m {p['ms']:.1f} ms", flush=True)
+    after = uptime()
+    print()
+    print(table(results))
+    print()
+    print(details(results))
+    print(f"\nload before: {before}\nload after:  {after}")
+    if args.results != "-":
+        write_results(args.results, results, before, after, args.bin, sys.argv[1:])
+        print(f"written to {args.results}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,93 @@
+#!/usr/bin/env python3
+"""Per-step error analysis of a KITTI pose file against ground truth: splits the drift into a
+systematic part (mean error of the epoch-to-epoch motion: a scale or heading bias accumulates
+linearly with distance) and a random part (spread of the step errors: accumulates as a random
+walk). This says where a trajectory's drift comes from, which `phototraverse eval`'s segment
+averages do not.
+
+For each step k-1 -> k: the true and estimated relative motions rel = inv(P_k-1) P_k (left camera
+of k-1, KITTI axes: x right, y down, z forward), the error E = inv(rel_gt) rel_est; reported:
+scale = |t_est| / |t_gt| - 1 (in %), E's translation per metre travelled (x, y, z in %) and E's
+rotation vector (about x = pitch, y = yaw, z = roll) in millidegrees per step; mean and standard
+deviation over the steps.
+
+usage: steps.py GT EST [EST ...]
+"""
+import sys
+
+import numpy as np
+
+
+def read_poses(path):
+    rows = []
+    with open(path) as f:
+        for line in f:
+            line = line.strip()
+            if not line or line.startswith("#"):
+                continue
+            m = np.eye(4)
+            m[:3] = np.array([float(v) for v in line.split()]).reshape(3, 4)
+            rows.append(m)
+    return rows
+
+
+def rotation_vector(R):
+    """Axis * angle (radians) of a rotation matrix."""
+    c = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(c)
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    s = np.linalg.norm(w)
+    if s < 1e-15:
+        return 0.5 * w  # small-angle limit
+    return w / s * angle
+
+
+def step_errors(gt, est):
+    """Arrays per step: scale % (n), translation error % of the step (n x 3), rotation mdeg (n x 3)."""
+    if len(gt) != len(est):
+        raise ValueError(f"{len(gt)} ground-truth poses, {len(est)} estimated")
+    scale, trans, rot = [], [], []
+    for k in range(1, len(gt)):
+        rg = np.linalg.inv(gt[k - 1]) @ gt[k]
+        re = np.linalg.inv(est[k - 1]) @ est[k]
+        d = np.linalg.norm(rg[:3, 3])
+        if d < 1e-6:
+            continue  # standing still: no scale to speak of
+        e = np.linalg.inv(rg) @ re
+        scale.append((np.linalg.norm(re[:3, 3]) / d - 1.0) * 100.0)
+        trans.append(e[:3, 3] / d * 100.0)
+        rot.append(np.degrees(rotation_vector(e[:3, :3])) * 1e3)
+    return np.array(scale), np.array(trans).reshape(-1, 3), np.array(rot).reshape(-1, 3)
+
+
+def summary(gt_path, est_path):
+    s, t, r = step_errors(read_poses(gt_path), read_poses(est_path))
+    return {
+        "steps": int(len(s)),
+        "scale_pct": {"mean": float(s.mean()), "std": float(s.std())},
+        "translation_pct_xyz": {"mean": t.mean(axis=0).tolist(), "std": t.std(axis=0).tolist()},
+        "rotation_mdeg_xyz": {"mean": r.mean(axis=0).tolist(), "std": r.std(axis=0).tolist()},
+    }
+
+
+def describe(name, s):
+    tm, ts = s["translation_pct_xyz"]["mean"], s["translation_pct_xyz"]["std"]
+    rm, rs = s["rotation_mdeg_xyz"]["mean"], s["rotation_mdeg_xyz"]["std"]
+    return (f"{name}: scale {s['scale_pct']['mean']:+.3f} +- {s['scale_pct']['std']:.3f} % per step; "
+            f"translation error x/y/z {tm[0]:+.3f}/{tm[1]:+.3f}/{tm[2]:+.3f} "
+            f"+- {ts[0]:.3f}/{ts[1]:.3f}/{ts[2]:.3f} % of the step; "
+            f"rotation pitch/yaw/roll {rm[0]:+.2f}/{rm[1]:+.2f}/{rm[2]:+.2f} "
+            f"+- {rs[0]:.2f}/{rs[1]:.2f}/{rs[2]:.2f} mdeg per step")
+
+
+def main():
+    if len(sys.argv) < 3:
+        print(__doc__, file=sys.stderr)
+        return 2
+    for est in sys.argv[2:]:
+        print(describe(est, summary(sys.argv[1], est)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
