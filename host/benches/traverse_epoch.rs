@@ -146,6 +146,7 @@ fn main() -> Result<(), String> {
     let mut stages: [Vec<f64>; 6] = Default::default();
     let (mut ties, mut flagged) = (Vec::new(), 0usize);
     let (mut iters, mut obs) = (Vec::new(), Vec::new());
+    let mut flag_list = Vec::new();
     let (mut kps, mut stereo) = (Vec::new(), Vec::new());
     let mut poses = Vec::new();
     for i in 0..ds.len() {
@@ -174,7 +175,10 @@ fn main() -> Result<(), String> {
         kps.push(out.keypoints[0] as f64);
         stereo.push(out.stereo_matches as f64);
         obs.push(out.observations as f64);
-        flagged += (out.flags != 0) as usize;
+        if out.flags != 0 {
+            flagged += 1;
+            flag_list.push(format!("{i}:{:#x}", out.flags));
+        }
         poses.push(kitti_from_pose(&ds.datum, &out.left));
     }
     println!("{} epochs of {}, one thread (CPU time)", ds.len(), args[0]);
@@ -192,6 +196,9 @@ fn main() -> Result<(), String> {
         percentile(&mut obs, 0.5),
         percentile(&mut iters, 0.5),
     );
+    if !flag_list.is_empty() {
+        println!("flags (epoch:bits, see traverse::flags): {}", flag_list.join(" "));
+    }
     if let Some(path) = poses_out {
         phototraverse_host::poses::write_poses(&path, &poses).map_err(|e| e.to_string())?;
     }

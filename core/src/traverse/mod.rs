@@ -325,7 +325,11 @@ impl<'a> Traverse<'a> {
         self.cur = fill;
         self.have_prev = true;
         out.flags |= match report.status {
-            MatchStatus::Lost => flags::LOST,
+            // The matcher calls an epoch lost below its own (fallback) threshold; the
+            // traverse is lost only when too few tie points remain to adjust it.
+            MatchStatus::Lost if (report.tie_points as usize) < self.cfg.min_tie_points => {
+                flags::LOST
+            }
             MatchStatus::NoKeypoints => flags::NO_FEATURES,
             MatchStatus::NoStereoMatches => flags::NO_STEREO,
             _ => 0,
