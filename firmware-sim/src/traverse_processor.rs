@@ -56,6 +56,7 @@ pub fn traverse_config(c: &Configure) -> Result<TraverseConfig, BuildError> {
     cfg.adjust.window = window;
     cfg.matching.track_history = window;
     cfg.matching.max_tracks = (p.track_capacity as usize).max(1);
+    cfg.fit_capacities();
     Ok(cfg)
 }
 

@@ -175,16 +175,22 @@ impl core::fmt::Display for AdjustError {
     }
 }
 
-/// One image measurement of a tie point.
+/// One image measurement of a tie point, 36 bytes.
+///
+/// Stored in `f32`: photo-coordinates of a few millimetres keep about 5e-7 mm
+/// (1e-4 pixel at 5 um pixels), far below any measurement noise; weights and the robust
+/// factor need fewer digits still. Everything computed from them (residuals, normal
+/// equations) is `f64`: read them through [`Observation::xy_mm`] and
+/// [`Observation::weights`].
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct Observation {
     /// Corrected photo-coordinates `(xc, yc)`, mm.
-    pub xy: [f64; 2],
+    pub xy: [f32; 2],
     /// Weights `[p_x, p_y]`, `1/mm^2` for the sigma scheme.
-    pub weight: [f64; 2],
+    pub weight: [f32; 2],
     /// Robust factor set by the solver (1 = full weight, 0 = excluded).
-    pub factor: f64,
+    pub factor: f32,
     /// Point index (from [`Window::add_point`]).
     pub point: u32,
     /// Epoch id (from [`Window::add_epoch`]).
@@ -206,8 +212,8 @@ impl Observation {
 
     pub fn new(epoch: u32, camera: Camera, point: u32, xy: [f64; 2], weight: [f64; 2]) -> Self {
         Observation {
-            xy,
-            weight,
+            xy: [xy[0] as f32, xy[1] as f32],
+            weight: [weight[0] as f32, weight[1] as f32],
             factor: 1.0,
             point,
             epoch,
@@ -216,6 +222,18 @@ impl Observation {
             flags: 0,
             _pad: [0; 2],
         }
+    }
+
+    /// Photo-coordinates, mm, widened for the computation.
+    #[inline]
+    pub fn xy_mm(&self) -> [f64; 2] {
+        [self.xy[0] as f64, self.xy[1] as f64]
+    }
+
+    /// Weights `[p_x, p_y]` (without the robust factor), widened for the computation.
+    #[inline]
+    pub fn weights(&self) -> [f64; 2] {
+        [self.weight[0] as f64, self.weight[1] as f64]
     }
 
     pub fn is_flagged(&self) -> bool {
@@ -807,7 +825,7 @@ impl<'a> Window<'a> {
             &self.points[o.point as usize].xyz,
         )
         .ok()?;
-        Some([o.xy[0] - pr.xy[0], o.xy[1] - pr.xy[1]])
+        Some([o.xy[0] as f64 - pr.xy[0], o.xy[1] as f64 - pr.xy[1]])
     }
 
     /// Items refused because a capacity was full: (points, observations).
@@ -1019,8 +1037,9 @@ impl<'a> Window<'a> {
             };
             self.obs[oi].flags &= !Observation::BEHIND;
             used += 1;
-            let r = [o.xy[0] - pr.xy[0], o.xy[1] - pr.xy[1]];
-            let wt = [o.weight[0] * o.factor, o.weight[1] * o.factor];
+            let r = [o.xy[0] as f64 - pr.xy[0], o.xy[1] as f64 - pr.xy[1]];
+            let f = o.factor as f64;
+            let wt = [o.weight[0] as f64 * f, o.weight[1] as f64 * f];
             for c in 0..2 {
                 cost += wt[c] * r[c] * r[c];
                 let jp = &pr.d_point[c];
@@ -1417,8 +1436,9 @@ impl<'a> Window<'a> {
                 &pt.xyz,
             ) {
                 Some(xy) => {
-                    let r = [o.xy[0] - xy[0], o.xy[1] - xy[1]];
-                    cost += o.factor * (o.weight[0] * r[0] * r[0] + o.weight[1] * r[1] * r[1]);
+                    let r = [o.xy[0] as f64 - xy[0], o.xy[1] as f64 - xy[1]];
+                    let w = o.weights();
+                    cost += o.factor as f64 * (w[0] * r[0] * r[0] + w[1] * r[1] * r[1]);
                     self.obs[i].flags &= !Observation::BEHIND;
                 }
                 None => {
@@ -1550,7 +1570,7 @@ impl<'a> Window<'a> {
                     if let Some(r) = self.residual(i) {
                         if r[0].abs() > threshold_mm {
                             let o = &mut self.obs[i];
-                            o.weight = [SEED_REWEIGHT, SEED_REWEIGHT];
+                            o.weight = [SEED_REWEIGHT as f32; 2];
                             o.flags |= Observation::FLAGGED;
                         }
                     }
@@ -1618,7 +1638,7 @@ impl<'a> Window<'a> {
     /// Standardised 2-D residual `sqrt(v^T P v)` of every observation into `residuals`.
     fn normalised_residuals(&mut self) {
         for i in 0..self.n_obs {
-            let w = self.obs[i].weight;
+            let w = self.obs[i].weights();
             self.residuals[i] = match self.residual(i) {
                 Some(r) => libm::sqrt(w[0] * r[0] * r[0] + w[1] * r[1] * r[1]),
                 None => f64::INFINITY,
@@ -1639,8 +1659,8 @@ impl<'a> Window<'a> {
         let mut change: f64 = 0.0;
         for i in 0..n {
             let f = cauchy_factor(self.residuals[i] / scale, 2.385);
-            change = change.max((f - self.obs[i].factor).abs());
-            self.obs[i].factor = f;
+            change = change.max((f - self.obs[i].factor as f64).abs());
+            self.obs[i].factor = f as f32;
         }
         change
     }
@@ -1764,7 +1784,7 @@ impl<'a> Window<'a> {
         let Ok(pr) = self.project(slot, cam, &xyz) else {
             return f64::INFINITY;
         };
-        let r = [o.xy[0] - pr.xy[0], o.xy[1] - pr.xy[1]];
+        let r = [o.xy[0] as f64 - pr.xy[0], o.xy[1] as f64 - pr.xy[1]];
         let j = nalgebra::Matrix2x3::new(
             pr.d_point[0][0],
             pr.d_point[0][1],
@@ -1775,9 +1795,10 @@ impl<'a> Window<'a> {
         );
         let jq = j * vinv * j.transpose();
         let sign = if o.factor > 0.0 || all { -1.0 } else { 1.0 };
-        let q = nalgebra::Matrix2::new(1.0 / o.weight[0], 0.0, 0.0, 1.0 / o.weight[1]) + jq * sign;
+        let ow = o.weights();
+        let q = nalgebra::Matrix2::new(1.0 / ow[0], 0.0, 0.0, 1.0 / ow[1]) + jq * sign;
         // Untestable when the observation carries (almost) no redundancy.
-        if !(q[(0, 0)] > 1e-3 / o.weight[0]) || !(q[(1, 1)] > 1e-3 / o.weight[1]) {
+        if !(q[(0, 0)] > 1e-3 / ow[0]) || !(q[(1, 1)] > 1e-3 / ow[1]) {
             return 0.0;
         }
         match q.try_inverse() {
