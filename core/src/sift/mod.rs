@@ -141,7 +141,7 @@ impl<'a> Sift<'a> {
         let hrings = arena.alloc_slice::<i16>(geo.hring_rows * w)?;
         let grings = arena.alloc_slice::<i16>(geo.gring_rows * w)?;
         let dog = arena.alloc_slice::<i16>(dog_len(&geo, w))?;
-        let (a, b) = base_lens(w, cfg.max_height);
+        let (a, b) = base_lens(w, cfg.max_height, cfg.octaves);
         let base_a = arena.alloc_slice::<i16>(a)?;
         let base_b = arena.alloc_slice::<i16>(b)?;
         let pad = arena.alloc_slice::<i16>(w + 2 * MAX_RADIUS)?;
