@@ -137,12 +137,8 @@ pub struct Geometry {
     pub depth: [usize; MAX_LEVELS],
     /// First row of each level's Gaussian ring in the shared ring buffer.
     pub gring_row0: [usize; MAX_LEVELS],
-    /// First row of each level's horizontal-pass ring (levels >= 1).
-    pub hring_row0: [usize; MAX_LEVELS],
     /// Rows of all Gaussian rings.
     pub gring_rows: usize,
-    /// Rows of all horizontal rings.
-    pub hring_rows: usize,
     /// Rows a keypoint waits for its descriptor neighbourhood (and reaches back).
     pub margin: usize,
     /// Cells of the spreading grid.
@@ -236,9 +232,7 @@ impl SiftConfig {
             delay: [0; MAX_LEVELS],
             depth: [0; MAX_LEVELS],
             gring_row0: [0; MAX_LEVELS],
-            hring_row0: [0; MAX_LEVELS],
             gring_rows: 0,
-            hring_rows: 0,
             margin: 0,
             cells: self.grid_cols * self.grid_rows,
         };
@@ -267,7 +261,7 @@ impl SiftConfig {
         let mut row = 0;
         for k in 0..n {
             let lag = g.delay[last] - g.delay[k];
-            g.depth[k] = if k >= 1 && k <= self.levels {
+            let depth = if k >= 1 && k <= self.levels {
                 // Orientation and descriptor rows: back to r_proc minus the reach of the
                 // largest keypoint this level describes (keypoints of refined layer in
                 // [k - 0.5, k + 0.5) sample level k), ahead to the newest row produced.
@@ -277,16 +271,18 @@ impl SiftConfig {
                 // Difference of Gaussians around the detection row only.
                 2 * REFINE_ROWS + lag + 1
             };
+            // Level k+1 is blurred vertically from this ring: it must also hold the
+            // kernel's rows around the row being produced.
+            let source = if k + 1 < n {
+                2 * g.radius[k + 1] + 1
+            } else {
+                0
+            };
+            g.depth[k] = depth.max(source);
             g.gring_row0[k] = row;
             row += g.depth[k];
         }
         g.gring_rows = row;
-        let mut hrow = 0;
-        for k in 1..n {
-            g.hring_row0[k] = hrow;
-            hrow += 2 * g.radius[k] + 1;
-        }
-        g.hring_rows = hrow;
         g
     }
 
@@ -309,11 +305,6 @@ impl SiftConfig {
             "sift.kernels",
             ComponentKind::Working,
             slice_bytes::<i32>(kernel_len(&g)),
-        );
-        budget.add(
-            "sift.hrings",
-            ComponentKind::Working,
-            slice_bytes::<i16>(g.hring_rows * w),
         );
         budget.add(
             "sift.gauss_rings",
