@@ -25,7 +25,7 @@ use super::cholesky;
 use super::constraints::{base_length, distance, prior_residual, smoothness};
 use super::geometry::{project_rig, project_with, project_xy, Camera, RigParams, Rotations};
 use super::quality::ChiSquareTest;
-use super::weighting::{cauchy_factor, median, CHI2_2_MEDIAN, SEED_REWEIGHT};
+use super::weighting::{cauchy_factor, median_by_rank, CHI2_2_MEDIAN, SEED_REWEIGHT};
 use crate::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget, OutOfMemory};
 use crate::camera::{Pose, Rig};
 use bytemuck::{Pod, Zeroable};
@@ -355,7 +355,6 @@ pub struct Window<'a> {
     scratch: &'a mut [BlockScratch],
     touched: &'a mut [u32],
     residuals: &'a mut [f64],
-    work: &'a mut [f64],
     dropped_points: usize,
     dropped_observations: usize,
     singular_epoch: Option<usize>,
@@ -411,11 +410,7 @@ impl AdjustConfig {
             ComponentKind::Working,
             bytes::<BlockScratch>(w1).saturating_add(bytes::<u32>(w1)),
         );
-        budget.add(
-            "adjust.residuals",
-            ComponentKind::Working,
-            bytes::<f64>(o).saturating_mul(2),
-        );
+        budget.add("adjust.residuals", ComponentKind::Working, bytes::<f64>(o));
     }
 
     fn validate(&self) -> Result<(), AdjustError> {
@@ -482,7 +477,6 @@ impl<'a> Window<'a> {
         let scratch = arena.alloc_slice::<BlockScratch>(w + 1)?;
         let touched = arena.alloc_slice::<u32>(w + 1)?;
         let residuals = arena.alloc_slice::<f64>(o)?;
-        let work = arena.alloc_slice::<f64>(o)?;
         let r = RigParams::from_rig(rig);
         Ok(Window {
             cfg,
@@ -509,7 +503,6 @@ impl<'a> Window<'a> {
             scratch,
             touched,
             residuals,
-            work,
             dropped_points: 0,
             dropped_observations: 0,
             singular_epoch: None,
@@ -1651,10 +1644,8 @@ impl<'a> Window<'a> {
         self.normalised_residuals();
         let n = self.n_obs;
         // Median of t^2 over chi2_2's median: the robust variance factor.
-        for i in 0..n {
-            self.work[i] = self.residuals[i] * self.residuals[i];
-        }
-        let scale2 = (median(&mut self.work[..n]) / CHI2_2_MEDIAN).max(1e-30);
+        let res = &*self.residuals;
+        let scale2 = (median_by_rank(n, |i| Some(res[i] * res[i])) / CHI2_2_MEDIAN).max(1e-30);
         let scale = libm::sqrt(scale2);
         let mut change: f64 = 0.0;
         for i in 0..n {
@@ -1672,16 +1663,11 @@ impl<'a> Window<'a> {
     fn snoop(&mut self, critical: f64, round: usize) -> bool {
         self.statistics();
         let n = self.n_obs;
-        let mut m = 0;
-        for i in 0..n {
-            if self.obs[i].factor > 0.0 && self.residuals[i].is_finite() {
-                self.work[m] = self.residuals[i];
-                m += 1;
-            }
-        }
+        let (res, obs) = (&*self.residuals, &*self.obs);
+        let used = |i: usize| (obs[i].factor > 0.0 && res[i].is_finite()).then_some(res[i]);
         // Median scale: 1 when the weights match the noise, and right also
         // with the seed's weights whose scale is arbitrary.
-        let scale2 = (median(&mut self.work[..m]) / CHI2_2_MEDIAN).max(1e-30);
+        let scale2 = (median_by_rank(n, used) / CHI2_2_MEDIAN).max(1e-30);
         self.apply_flags(critical, round, scale2)
     }
 
