@@ -4,6 +4,7 @@
 use phototraverse_host::dataset::Dataset;
 use phototraverse_host::link::LinkOptions;
 use phototraverse_host::pipeline::PipelineSettings;
+use phototraverse_host::report::EpochStatus;
 use phototraverse_host::runner::{run_dataset, RunOptions};
 use phototraverse_host::synth::{generate, SynthOptions};
 use std::path::Path;

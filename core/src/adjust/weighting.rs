@@ -78,34 +78,49 @@ pub fn median(values: &mut [f64]) -> f64 {
 }
 
 /// The same median as [`median`] (the element of rank `len / 2` in `f64::total_cmp`
-/// order) of the values `value(i)` for `i < n` that are `Some`, without a copy: a
-/// bisection over the totally ordered keys of the bit patterns, counting at most 64
-/// times. Spares the adjustment a scratch buffer as long as its observations.
+/// order) of the values `value(i)` for `i < n` that are `Some`, without a copy: a radix
+/// selection over the totally ordered keys of the bit patterns, one byte per pass (nine
+/// passes over the values). Spares the adjustment a scratch buffer as long as its
+/// observations.
 pub fn median_by_rank(n: usize, value: impl Fn(usize) -> Option<f64>) -> f64 {
-    // Monotone map of total_cmp order onto i64 order (as in `f64::total_cmp`).
+    // Monotone map of total_cmp order onto u64 order.
     let key = |x: f64| {
-        let b = x.to_bits() as i64;
-        b ^ ((((b >> 63) as u64) >> 1) as i64)
+        let b = x.to_bits();
+        if b >> 63 == 1 {
+            !b
+        } else {
+            b | 1 << 63
+        }
     };
     let count = (0..n).filter(|&i| value(i).is_some()).count();
     if count == 0 {
         return 0.0;
     }
-    let mid = count / 2;
-    // Smallest key k with more than `mid` values at or below it.
-    let (mut lo, mut hi) = (i64::MIN, i64::MAX);
-    while lo < hi {
-        let m = lo + ((hi as i128 - lo as i128) / 2) as i64;
-        let at_or_below = (0..n).filter_map(&value).filter(|&v| key(v) <= m).count();
-        if at_or_below > mid {
-            hi = m;
-        } else {
-            lo = m + 1;
+    let mut rank = count / 2;
+    let mut prefix = 0u64;
+    for pass in 0..8u32 {
+        let shift = 56 - 8 * pass;
+        // Bits above this byte, already chosen.
+        let high = if pass == 0 { 0 } else { !0u64 << (shift + 8) };
+        let mut hist = [0usize; 256];
+        for k in (0..n).filter_map(&value).map(key) {
+            if k & high == prefix {
+                hist[((k >> shift) & 0xff) as usize] += 1;
+            }
         }
+        let mut digit = 0;
+        while digit < 255 && rank >= hist[digit] {
+            rank -= hist[digit];
+            digit += 1;
+        }
+        prefix |= (digit as u64) << shift;
     }
-    let k = lo;
-    let bits = k ^ ((((k >> 63) as u64) >> 1) as i64);
-    f64::from_bits(bits as u64)
+    let bits = if prefix >> 63 == 1 {
+        prefix & !(1 << 63)
+    } else {
+        !prefix
+    };
+    f64::from_bits(bits)
 }
 
 #[cfg(test)]
