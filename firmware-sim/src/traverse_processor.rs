@@ -8,7 +8,7 @@ use phototraverse_core::budget::{Arena, MemoryBudget};
 use phototraverse_core::camera::Pose;
 use phototraverse_core::matching::StereoGeometry;
 use phototraverse_core::protocol::messages::{
-    processor_kind, stage, status, Configure, EpochResult, AUX_GNSS, AUX_ODOMETER,
+    processor_kind, stage, status, Configure, EpochResult, RigEstimate, AUX_GNSS, AUX_ODOMETER,
 };
 use phototraverse_core::traverse::{
     flags, AuxObservations, EpochStatus, Traverse, TraverseConfig, TraverseError,
@@ -36,8 +36,17 @@ pub fn traverse_config(c: &Configure) -> Result<TraverseConfig, BuildError> {
         return Err(BuildError::Invalid("rig: zero base"));
     }
     let p = &c.pipeline;
-    let datum = Pose::from_degrees(90.0, 0.0, 0.0, [0.0; 3]);
+    let t = &c.traverse;
+    if !t.datum.iter().all(|v| v.is_finite()) {
+        return Err(BuildError::Invalid("datum: value not finite"));
+    }
+    if !(t.sigma_px > 0.0 && t.sigma_px.is_finite()) {
+        return Err(BuildError::Invalid("image sigma must be positive"));
+    }
+    let datum = Pose::from_params(&t.datum);
     let mut cfg = TraverseConfig::for_rig(rig, datum);
+    cfg.sigma_px = t.sigma_px;
+    cfg.adjust.estimate_rig = t.estimate_rig;
     let n = p.keypoints_per_image.clamp(1, 100_000) as usize;
     cfg.sift.max_keypoints = n;
     cfg.matching.max_keypoints = n;
@@ -56,6 +65,9 @@ pub fn traverse_config(c: &Configure) -> Result<TraverseConfig, BuildError> {
     cfg.adjust.window = window;
     cfg.matching.track_history = window;
     cfg.matching.max_tracks = (p.track_capacity as usize).max(1);
+    // The mode's own settings (seed window lengths included) come last, then the
+    // capacities that follow from the window.
+    let mut cfg = cfg.with_mode(t.mode);
     cfg.fit_capacities();
     Ok(cfg)
 }
@@ -143,6 +155,13 @@ impl EpochProcessor for TraverseProcessor<'_> {
             out.new_points as f64,
             out.redundancy as f64,
         ];
+        if self.traverse.config().adjust.estimate_rig {
+            let (rig, std) = self.traverse.rig_estimate();
+            result.rig = Some(RigEstimate {
+                params: rig.to_array().map(|v| v as f32),
+                std: std.map(|v| v as f32),
+            });
+        }
         let mut timings_us = [0u32; stage::COUNT];
         timings_us[stage::SIFT_LEFT] = out.times.sift_left_us;
         timings_us[stage::SIFT_RIGHT] = out.times.sift_right_us;
@@ -150,5 +169,77 @@ impl EpochProcessor for TraverseProcessor<'_> {
         timings_us[stage::INITIAL_VALUES] = out.times.initial_us;
         timings_us[stage::ADJUST] = out.times.adjust_us;
         EpochOutput { result, timings_us }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use phototraverse_core::adjust::Robust;
+    use phototraverse_core::camera::{Interior, Rig};
+    use phototraverse_core::protocol::messages::{
+        Pipeline, Repr, TraverseMode, TraverseSettings, CONFIG_VERSION,
+    };
+
+    fn configure(traverse: TraverseSettings) -> Configure {
+        let rig = Rig::rectified(Interior::pinhole_px(320, 240, 300.0), 0.4);
+        Configure {
+            version: CONFIG_VERSION,
+            rig,
+            pipeline: Pipeline {
+                max_width: 320,
+                max_height: 240,
+                window_len: 8,
+                ..Pipeline::default()
+            },
+            traverse,
+        }
+    }
+
+    #[test]
+    fn configure_v2_fields_reach_the_traverse_config() {
+        let d = traverse_config(&configure(TraverseSettings::default())).unwrap();
+        assert_eq!(d.adjust.window, 8);
+        assert!(!d.adjust.estimate_rig);
+        assert_eq!(d.datum, Pose::from_degrees(90.0, 0.0, 0.0, [0.0; 3]));
+        assert_eq!(d.sigma_px, 0.5);
+        let t = TraverseSettings {
+            mode: TraverseMode::Seed2014,
+            estimate_rig: true,
+            sigma_px: 0.3,
+            datum: [1.5, 0.01, 0.02, 5.0, 6.0, 1.2],
+        };
+        let c = traverse_config(&configure(t)).unwrap();
+        assert_eq!(c.adjust.window, 2);
+        assert!(matches!(c.adjust.robust, Robust::SeedReweight { .. }));
+        assert!(c.adjust.estimate_rig);
+        assert_eq!(c.sigma_px, 0.3);
+        assert_eq!(c.datum.to_params(), t.datum);
+        let s = traverse_config(&configure(TraverseSettings {
+            mode: TraverseMode::Seed2006,
+            ..t
+        }))
+        .unwrap();
+        assert_eq!(s.adjust.window, 7);
+        assert!(s.adjust.sigmas.velocity_change_mps > 0.0);
+        let bad = TraverseSettings { sigma_px: 0.0, ..t };
+        assert!(traverse_config(&configure(bad)).is_err());
+        let nan = TraverseSettings {
+            datum: [f64::NAN; 6],
+            ..t
+        };
+        assert!(traverse_config(&configure(nan)).is_err());
+    }
+
+    #[test]
+    fn a_result_with_the_rig_fits_a_transmit_slot() {
+        let mut r = EpochResult::empty(u32::MAX, status::FLAGGED);
+        r.rig = Some(RigEstimate {
+            params: [1.0; 6],
+            std: [1.0; 6],
+        });
+        let mut buf = [0u8; 1024];
+        let n = r.emit(&mut buf).unwrap();
+        assert!(n <= crate::link::TX_MAX_PAYLOAD, "{n} bytes");
     }
 }

@@ -33,6 +33,7 @@ fn config() -> Configure {
     let rig = Rig::rectified(Interior::pinhole_px(W as u32, H as u32, 700.0), 0.54);
     Configure {
         version: CONFIG_VERSION,
+        traverse: Default::default(),
         rig,
         pipeline: Pipeline {
             max_width: W,

@@ -1,10 +1,60 @@
 //! Pipeline settings a user gives in a TOML file (`--config FILE`) and the
 //! `Configure` message they become.
 use anyhow::{Context, Result};
-use phototraverse_core::camera::Rig;
-use phototraverse_core::protocol::messages::{Configure, Pipeline, CONFIG_VERSION};
+use phototraverse_core::camera::{Pose, Rig};
+use phototraverse_core::protocol::messages::{
+    Configure, Pipeline, TraverseMode, TraverseSettings, CONFIG_VERSION,
+};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
+
+/// How the traverse adjusts (`--mode`, `mode = "..."`): see docs/configuration.md.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Sliding window (8 epochs), robust snooping, base-length and smoothness constraints.
+    #[default]
+    Window,
+    /// Seed 000 (Lemes Neto 2014): two-epoch sequences, base constraints, one re-weighting.
+    Seed2014,
+    /// Seed 002 (Barbosa 2006): 7 bases together, base-length and velocity constraints.
+    Seed2006,
+}
+
+impl Mode {
+    pub fn core(self) -> TraverseMode {
+        match self {
+            Mode::Window => TraverseMode::Window,
+            Mode::Seed2014 => TraverseMode::Seed2014,
+            Mode::Seed2006 => TraverseMode::Seed2006,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        self.core().name()
+    }
+}
+
+/// The datum in a settings file: the left camera at epoch 0.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DatumSettings {
+    pub omega_deg: f64,
+    pub phi_deg: f64,
+    pub kappa_deg: f64,
+    pub position_m: [f64; 3],
+}
+
+impl DatumSettings {
+    pub fn pose(&self) -> Pose {
+        Pose::from_degrees(
+            self.omega_deg,
+            self.phi_deg,
+            self.kappa_deg,
+            self.position_m,
+        )
+    }
+}
 
 /// Pipeline settings; every key is optional (defaults in brackets).
 ///
@@ -18,6 +68,10 @@ use std::path::Path;
 /// max_disparity_px = 320.0     # rectified rigs: disparity search range
 /// window = 8                   # epochs in the adjustment window
 /// track_capacity = 600         # tracks kept at once
+/// mode = "window"              # window, seed2014, seed2006
+/// estimate_rig = false         # estimate the relative orientation
+/// sigma_px = 0.5               # a-priori image sigma, pixels
+/// # [datum] omega_deg, phi_deg, kappa_deg, position_m (default: the dataset's)
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -32,6 +86,11 @@ pub struct PipelineSettings {
     pub max_disparity_px: Option<f32>,
     pub window: u16,
     pub track_capacity: u32,
+    pub mode: Mode,
+    pub estimate_rig: bool,
+    pub sigma_px: f64,
+    /// `None`: the dataset's datum (rig.toml `[datum]`, else omega 90 at the origin).
+    pub datum: Option<DatumSettings>,
 }
 
 impl Default for PipelineSettings {
@@ -46,6 +105,10 @@ impl Default for PipelineSettings {
             max_disparity_px: None,
             window: 8,
             track_capacity: 600,
+            mode: Mode::Window,
+            estimate_rig: false,
+            sigma_px: 0.5,
+            datum: None,
         }
     }
 }
@@ -86,14 +149,37 @@ impl PipelineSettings {
             self.track_capacity >= 8,
             "track_capacity must be at least 8"
         );
+        anyhow::ensure!(
+            self.sigma_px > 0.0 && self.sigma_px.is_finite(),
+            "sigma_px must be positive"
+        );
+        if let Some(d) = &self.datum {
+            anyhow::ensure!(
+                d.pose().to_params().iter().all(|v| v.is_finite()),
+                "datum: values must be finite"
+            );
+        }
         Ok(())
     }
 
-    /// The configuration message for `rig`.
+    /// The configuration message for `rig` (datum: the settings' or omega 90 at the origin).
     pub fn configure(&self, rig: &Rig) -> Configure {
+        self.configure_for(rig, &crate::dataset::default_datum())
+    }
+
+    /// The configuration message for a dataset's rig and datum (the settings'
+    /// `[datum]`, when given, wins over `dataset_datum`).
+    pub fn configure_for(&self, rig: &Rig, dataset_datum: &Pose) -> Configure {
         let (w, h) = (rig.left.width_px, rig.left.height_px);
+        let datum = self.datum.map_or(*dataset_datum, |d| d.pose());
         Configure {
             version: CONFIG_VERSION,
+            traverse: TraverseSettings {
+                mode: self.mode.core(),
+                estimate_rig: self.estimate_rig,
+                sigma_px: self.sigma_px,
+                datum: datum.to_params(),
+            },
             rig: *rig,
             pipeline: Pipeline {
                 max_width: w.min(u16::MAX as u32) as u16,
@@ -134,5 +220,37 @@ mod tests {
         std::fs::write(&bad, "window = 1\n").unwrap();
         let err = format!("{:#}", PipelineSettings::from_file(&bad).unwrap_err());
         assert!(err.contains("window must be at least 2"), "{err}");
+        std::fs::write(&bad, "mode = \"seed1999\"\n").unwrap();
+        let err = format!("{:#}", PipelineSettings::from_file(&bad).unwrap_err());
+        assert!(err.contains("seed1999"), "{err}");
+    }
+
+    #[test]
+    fn mode_rig_sigma_and_datum_reach_the_configure_message() {
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("seed.toml");
+        std::fs::write(
+            &f,
+            "mode = \"seed2006\"\nestimate_rig = true\nsigma_px = 0.8\n\
+             [datum]\nomega_deg = 92.0\nphi_deg = 1.0\nkappa_deg = -2.0\nposition_m = [5.0, 6.0, 1.2]\n",
+        )
+        .unwrap();
+        let s = PipelineSettings::from_file(&f).unwrap();
+        let rig = Rig::rectified(
+            phototraverse_core::camera::Interior::pinhole_px(320, 240, 300.0),
+            0.4,
+        );
+        let dataset = Pose::from_degrees(90.0, 0.0, 0.0, [1.0, 2.0, 3.0]);
+        let c = s.configure_for(&rig, &dataset);
+        assert_eq!(c.version, 2);
+        assert_eq!(c.traverse.mode, TraverseMode::Seed2006);
+        assert!(c.traverse.estimate_rig);
+        assert_eq!(c.traverse.sigma_px, 0.8);
+        let want = Pose::from_degrees(92.0, 1.0, -2.0, [5.0, 6.0, 1.2]).to_params();
+        assert_eq!(c.traverse.datum, want);
+        // Without [datum] the dataset's datum goes.
+        let d = PipelineSettings::default().configure_for(&rig, &dataset);
+        assert_eq!(d.traverse.datum, dataset.to_params());
+        assert_eq!(d.traverse.mode, TraverseMode::Window);
     }
 }

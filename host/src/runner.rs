@@ -11,12 +11,14 @@ use crate::link::LinkOptions;
 use crate::pipeline::PipelineSettings;
 use crate::poses::{format_pose, KittiPose};
 use crate::report::{
-    write_eop_csv, write_html, CameraEop, EpochRecord, EpochStatus, MemoryLine, RunReport,
+    write_eop_csv, write_html, CameraEop, EpochRecord, EpochStatus, MemoryLine, QualitySummary,
+    RigReport, RunReport,
 };
 use crate::session::{EpochFrames, Session, SessionOptions};
 use anyhow::{Context, Result};
+use phototraverse_core::adjust::quality::ChiSquareTest;
 use phototraverse_core::budget::{ComponentKind, MemoryBudget};
-use phototraverse_core::camera::{kitti_from_pose, pose_from_kitti, Pose};
+use phototraverse_core::camera::{kitti_from_pose, pose_from_kitti, Pose, Rig};
 use phototraverse_core::protocol::messages::{
     stage, status, ConfigAccepted, EpochResult, PixelFormat,
 };
@@ -51,7 +53,7 @@ pub struct RunOutcome {
 /// Runs `ds` into `out` (created if needed).
 pub fn run_dataset(ds: &Dataset, out: &Path, opts: &RunOptions) -> Result<RunOutcome> {
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let configure = opts.settings.configure(&ds.rig);
+    let configure = opts.settings.configure_for(&ds.rig, &ds.datum);
     let transport = opts
         .link
         .open()
@@ -113,6 +115,10 @@ struct Run<'d> {
     unreadable: Vec<usize>,
     accepted: ConfigAccepted,
     settings: PipelineSettings,
+    /// The rig the right cameras are placed with: the calibration, or the last estimate.
+    rig: Rig,
+    /// Two-sided global test of each adjusted epoch (from sigma0 and the redundancy).
+    chi2: Vec<ChiSquareTest>,
 }
 
 impl<'d> Run<'d> {
@@ -127,7 +133,7 @@ impl<'d> Run<'d> {
             .with_context(|| format!("cannot create {}", path.display()))?;
         let report = RunReport {
             dataset: ds.dir.display().to_string(),
-            mode: "window".into(),
+            mode: opts.settings.mode.name().into(),
             image_width: ds.rig.left.width_px,
             image_height: ds.rig.left.height_px,
             ..Default::default()
@@ -142,6 +148,8 @@ impl<'d> Run<'d> {
             unreadable: Vec::new(),
             accepted,
             settings: opts.settings,
+            rig: ds.rig,
+            chi2: Vec::new(),
         })
     }
 
@@ -178,6 +186,7 @@ impl<'d> Run<'d> {
                     })
                 })?;
                 let result = *session.result(e).context("result vanished")?;
+                self.note_rig_and_test(&result);
                 if let Some(st) = session.stats(e) {
                     self.epoch_ms
                         .push(st.timings_us[stage::TOTAL] as f64 / 1000.0);
@@ -219,7 +228,7 @@ impl<'d> Run<'d> {
 
     fn predicted(&self, i: usize, time: f64, note: String) -> EpochRecord {
         let left = self.prediction(time);
-        let right = self.ds.rig.right_pose(&left);
+        let right = self.rig.right_pose(&left);
         EpochRecord {
             epoch: i,
             time: Some(time),
@@ -259,7 +268,7 @@ impl<'d> Run<'d> {
             return rec;
         }
         let left = Pose::from_params(&r.pose);
-        let right = self.ds.rig.right_pose(&left);
+        let right = self.rig.right_pose(&left);
         let sigma = (r.sigma != [0.0; 6]).then_some(r.sigma);
         let stage_ms = timings
             .map(|t| {
@@ -288,10 +297,58 @@ impl<'d> Run<'d> {
         }
     }
 
+    /// Keeps the estimated rig (right cameras, report) and the epoch's global test.
+    fn note_rig_and_test(&mut self, r: &EpochResult) {
+        if let Some(est) = &r.rig {
+            let p = est.params.map(f64::from);
+            self.rig.relative_angles = [p[0], p[1], p[2]];
+            self.rig.base_m = [p[3], p[4], p[5]];
+            let s = est.std.map(f64::from);
+            let c = &self.ds.rig;
+            self.report.rig = Some(RigReport {
+                relative_angles_deg: [p[0], p[1], p[2]].map(f64::to_degrees),
+                base_m: self.rig.base_m,
+                std: [
+                    s[0].to_degrees(),
+                    s[1].to_degrees(),
+                    s[2].to_degrees(),
+                    s[3],
+                    s[4],
+                    s[5],
+                ],
+                calibration_angles_deg: c.relative_angles.map(f64::to_degrees),
+                calibration_base_m: c.base_m,
+            });
+        }
+        let dof = r.extra[3];
+        if matches!(r.status, status::OK | status::FLAGGED) && r.sigma0 > 0.0 && dof >= 1.0 {
+            let dof = dof as usize;
+            self.chi2
+                .push(ChiSquareTest::new(r.sigma0 * r.sigma0 * dof as f64, dof));
+        }
+    }
+
+    /// sigma0 and chi-square counts over the adjusted epochs.
+    fn quality(&self) -> Option<QualitySummary> {
+        if self.chi2.is_empty() {
+            return None;
+        }
+        let mut s0: Vec<f64> = self.report.epochs.iter().filter_map(|e| e.sigma0).collect();
+        let max = s0.iter().copied().fold(0.0, f64::max);
+        Some(QualitySummary {
+            adjusted: self.chi2.len(),
+            sigma0_median: median(&mut s0),
+            sigma0_max: max,
+            chi2_passed: self.chi2.iter().filter(|t| t.passed).count(),
+            chi2_failed: self.chi2.iter().filter(|t| t.statistic > t.upper).count(),
+            chi2_below: self.chi2.iter().filter(|t| t.statistic < t.lower).count(),
+        })
+    }
+
     fn memory_lines(&self, high_water: Option<u32>) -> Vec<MemoryLine> {
         // The firmware's own prediction: frames and traverse components.
         let mut budget = MemoryBudget::new();
-        let configure = self.settings.configure(&self.ds.rig);
+        let configure = self.settings.configure_for(&self.ds.rig, &self.ds.datum);
         let _ = configuration_budget(&TraverseFactory, &configure, &mut budget);
         let kind = |k: ComponentKind| format!("{k:?}").to_lowercase();
         let mut lines: Vec<MemoryLine> = budget
@@ -319,6 +376,7 @@ impl<'d> Run<'d> {
             .and_then(|l| session.stats(l as u32))
             .map(|s| s.memory_high_water);
         self.report.memory = self.memory_lines(high_water);
+        self.report.quality = self.quality();
         let mut evaluation = None;
         if let Some(gt) = &self.ds.ground_truth {
             let gt_part = &gt[..self.kitti.len().min(gt.len())];

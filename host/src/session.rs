@@ -189,6 +189,8 @@ impl Incoming {
     }
 }
 
+// Short-lived (one per decoded packet): the size of a Result with its rig block is fine.
+#[allow(clippy::large_enum_variant)]
 enum Event {
     Packet(u16, MessageType, Incoming),
     Malformed(u16),

@@ -97,6 +97,7 @@ fn config(w: u16, h: u16) -> Configure {
     let rig = Rig::rectified(Interior::pinhole_px(w as u32, h as u32, 100.0), 0.5);
     Configure {
         version: CONFIG_VERSION,
+        traverse: Default::default(),
         rig,
         pipeline: Pipeline {
             max_width: w,

@@ -1112,3 +1112,103 @@ fn absurd_configurations_give_a_budget_and_an_error_not_a_panic() {
         assert!(Window::new(cfg, &rig, &mut arena).is_err());
     }
 }
+
+#[test]
+fn perturbed_rig_is_recovered_and_survives_slides() {
+    // Observations from the true rig; the window starts from a rig with its relative
+    // angles off by ~0.2 deg and its base direction off by 5 mm (the base length is
+    // the calibrated one: images alone carry no scale). Window of 4 over 10 epochs.
+    let s = scene(33, 10, 500, 0.0);
+    let mut start = s.rig;
+    start.relative_angles = [
+        s.rig.relative_angles[0] + 0.003,
+        s.rig.relative_angles[1] - 0.002,
+        s.rig.relative_angles[2] + 0.004,
+    ];
+    start.base_m = [
+        s.rig.base_m[0],
+        s.rig.base_m[1] + 0.004,
+        s.rig.base_m[2] - 0.003,
+    ];
+    let cfg = AdjustConfig {
+        window: 4,
+        max_points: 500,
+        max_observations: s.obs.len(),
+        estimate_rig: true,
+        sigmas: ConstraintSigmas {
+            rig_angle_rad: 0.01,
+            rig_base_m: 0.01,
+            base_length_m: 1e-4,
+            ..ConstraintSigmas::default()
+        },
+        ..AdjustConfig::default()
+    };
+    let mut mem = arena_for(&cfg);
+    let mut arena = Arena::new(&mut mem);
+    let mut w = Window::new(cfg, &start, &mut arena).unwrap();
+    w.set_base_length(s.rig.base_length());
+    let truth = RigParams::from_rig(&s.rig).to_array();
+    let wt = 1.0 / (SIGMA_MM * SIGMA_MM);
+    let mut ids = vec![u32::MAX; s.points.len()];
+    let mut first_full_std = None;
+    for k in 0..10 {
+        if w.n_epochs() == 4 {
+            let before = w.rig();
+            w.slide().unwrap();
+            // A shared parameter: the slide keeps its value.
+            assert_eq!(w.rig(), before, "slide before epoch {k}");
+        }
+        w.add_epoch(&s.poses[k], 0.2 * k as f64).unwrap();
+        for (e, c, p, xy, _) in &s.obs {
+            if *e != k {
+                continue;
+            }
+            let alive = ids[*p] != u32::MAX && w.point(ids[*p]).is_some();
+            if !alive {
+                let t = s.points[*p];
+                ids[*p] = w
+                    .add_point([t[0] + 0.05, t[1] - 0.05, t[2] + 0.02])
+                    .unwrap();
+            }
+            let cam = if *c == 0 { Camera::Left } else { Camera::Right };
+            w.add_observation(Observation::new(k as u32, cam, ids[*p], *xy, [wt, wt]))
+                .unwrap();
+        }
+        if k == 0 {
+            continue;
+        }
+        let r = w.solve().unwrap();
+        assert!(r.converged, "epoch {k}: {r:?}");
+        let est = w.rig().to_array();
+        let sd = w.rig_std();
+        for i in 0..6 {
+            assert!(sd[i] > 0.0, "epoch {k}: std {i} {sd:?}");
+            assert!(
+                (est[i] - truth[i]).abs() <= 3.0 * sd[i],
+                "epoch {k}: rig parameter {i}: {} vs truth {} (std {})",
+                est[i],
+                truth[i],
+                sd[i]
+            );
+        }
+        if k == 3 {
+            first_full_std = Some(sd);
+        }
+        if k == 9 {
+            // What the six dropped epochs told about the rig is kept: with a window
+            // of four, about 10/4 of the first full window's information.
+            let f = first_full_std.unwrap();
+            for i in 0..3 {
+                assert!(sd[i] < 0.85 * f[i], "angle {i}: {} vs {}", sd[i], f[i]);
+            }
+        }
+    }
+    // Started 0.2 deg and 5 mm away: now within a fraction of that.
+    let est = w.rig().to_array();
+    for i in 0..3 {
+        assert!((est[i] - truth[i]).abs() < 3e-4, "angle {i}: {est:?}");
+    }
+    for i in 4..6 {
+        assert!((est[i] - truth[i]).abs() < 1e-3, "base {i}: {est:?}");
+    }
+}

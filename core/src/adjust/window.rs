@@ -102,6 +102,10 @@ pub struct AdjustConfig {
     pub robust: Robust,
     /// Convergence: relative decrease of `vTPv` below this stops the iterations.
     pub tolerance: f64,
+    /// Sliding-window mode of [`Robust::Snooping`]: exclusions found by earlier solves
+    /// stay as the starting set (snooping may readmit them) and the Cauchy rounds are
+    /// skipped, so an epoch only pays for the blunders its own observations bring.
+    pub keep_exclusions: bool,
 }
 
 impl Default for AdjustConfig {
@@ -116,6 +120,7 @@ impl Default for AdjustConfig {
             sigmas: ConstraintSigmas::default(),
             robust: Robust::snooping(),
             tolerance: 1e-12,
+            keep_exclusions: false,
         }
     }
 }
@@ -334,9 +339,15 @@ pub struct Window<'a> {
     cfg: AdjustConfig,
     rig: RigParams,
     rig_prior: RigParams,
+    /// Information of the rig prior: the calibration sigmas at first, the
+    /// marginal information of the estimate after a slide.
+    rig_prior_info: [f64; 36],
     nominal_base: f64,
     focal: [f64; 2],
     rig_std: [f64; 6],
+    /// Cofactor matrix `Q` of the rig at the last solution (valid when `rig_cov_valid`).
+    rig_cov: [f64; 36],
+    rig_cov_valid: bool,
     rig_rot: Rotations,
     origin: [f64; 3],
     epochs: &'a mut [EpochSlot],
@@ -456,6 +467,16 @@ fn sym3_inverse(v: &Matrix3<f64>) -> Option<Matrix3<f64>> {
     v.try_inverse()
 }
 
+/// Diagonal information of the rig's calibration prior (`sigmas.rig_*`).
+fn calibration_info(s: &ConstraintSigmas) -> [f64; 36] {
+    let mut info = [0.0; 36];
+    for i in 0..6 {
+        let sig = if i < 3 { s.rig_angle_rad } else { s.rig_base_m };
+        info[i * 6 + i] = 1.0 / (sig * sig);
+    }
+    info
+}
+
 impl<'a> Window<'a> {
     /// An empty window for `rig`, carving its buffers from `arena`.
     pub fn new(cfg: AdjustConfig, rig: &Rig, arena: &mut Arena<'a>) -> Result<Self, AdjustError> {
@@ -482,9 +503,12 @@ impl<'a> Window<'a> {
             cfg,
             rig: r,
             rig_prior: r,
+            rig_prior_info: calibration_info(&cfg.sigmas),
             nominal_base: rig.base_length(),
             focal: [rig.left.focal_mm, rig.right.focal_mm],
             rig_std: [0.0; 6],
+            rig_cov: [0.0; 36],
+            rig_cov_valid: false,
             rig_rot: Rotations::new(r.angles[0], r.angles[1], r.angles[2]),
             origin: [0.0; 3],
             epochs,
@@ -881,7 +905,9 @@ impl<'a> Window<'a> {
         next.prior = next.params;
         next.prior_info = info;
         next.flags |= EP_PRIOR;
-        next.flags &= !EP_ODOMETER; // its odometer leg led to the dropped epoch
+        // Its odometer leg led to the dropped epoch.
+        next.flags &= !EP_ODOMETER;
+        self.carry_rig_prior();
         self.epochs.copy_within(1..self.n_epochs, 0);
         self.n_epochs -= 1;
         self.first_id += 1;
@@ -892,6 +918,34 @@ impl<'a> Window<'a> {
         ];
         self.recentre(shift);
         Ok(dropped)
+    }
+
+    /// The rig is shared by every epoch: a slide keeps its value, and what the
+    /// dropped epoch told about it stays in its prior. The marginal information
+    /// `inv(Q_rig)` is the prior's plus the window's observations'; the dropped
+    /// epoch's share is taken as `1/n` of the latter, so the prior grows by one
+    /// epoch's worth per slide (carrying the whole marginal would count the
+    /// remaining epochs' observations again at every slide and make the rig
+    /// overconfident). Uses `Q` without sigma0, like the calibration prior.
+    fn carry_rig_prior(&mut self) {
+        if !(self.cfg.estimate_rig && self.rig_cov_valid) {
+            return;
+        }
+        let mut marginal = [0.0; 36];
+        if !invert6(&self.rig_cov, &mut marginal) {
+            return;
+        }
+        let n = self.n_epochs.max(1) as f64;
+        let mut info = self.rig_prior_info;
+        for (i, m) in info.iter_mut().zip(marginal) {
+            *i += (m - *i) / n;
+        }
+        let mut check = [0.0; 36];
+        if invert6(&info, &mut check) {
+            self.rig_prior = self.rig;
+            self.rig_prior_info = info;
+        }
+        self.rig_cov_valid = false;
     }
 
     /// Moves the local origin by `shift` (local coordinates).
@@ -1307,9 +1361,19 @@ impl<'a> Window<'a> {
         }
         if let Some(rb) = self.rig_block() {
             let r = prior_residual(&self.rig.to_array(), &self.rig_prior.to_array());
-            for (i, ri) in r.iter().enumerate() {
-                let sig = if i < 3 { s.rig_angle_rad } else { s.rig_base_m };
-                cost += self.row(normal, &[(6 * rb + i, 1.0)], *ri, 1.0 / (sig * sig));
+            let info = self.rig_prior_info;
+            for i in 0..6 {
+                let mut ir = 0.0;
+                for j in 0..6 {
+                    ir += info[i * 6 + j] * r[j];
+                    if normal {
+                        self.reduced[(6 * rb + i) * nc + 6 * rb + j] += info[i * 6 + j];
+                    }
+                }
+                cost += r[i] * ir;
+                if normal {
+                    self.rhs[6 * rb + i] -= ir;
+                }
             }
             count += 6;
             if s.base_length_m > 0.0 {
@@ -1541,9 +1605,12 @@ impl<'a> Window<'a> {
         }
         self.singular_epoch = None;
         self.build_index();
-        for o in self.obs[..self.n_obs].iter_mut() {
-            o.factor = 1.0;
-            o.flags = 0;
+        let keep = self.cfg.keep_exclusions && matches!(self.cfg.robust, Robust::Snooping { .. });
+        if !keep {
+            for o in self.obs[..self.n_obs].iter_mut() {
+                o.factor = 1.0;
+                o.flags = 0;
+            }
         }
         for p in self.points[..self.n_point_slots].iter_mut() {
             p.flags &= !PT_EXCLUDED;
@@ -1577,7 +1644,11 @@ impl<'a> Window<'a> {
                 let (it, conv) = self.least_squares(max_it)?;
                 report.iterations += it;
                 report.converged = conv;
-                if !self.detection_passes()? {
+                if self.detection_passes()? {
+                    // Accepted as is.
+                } else if keep {
+                    self.snoop_rounds(critical, 1, &mut report)?;
+                } else {
                     self.identify(critical, &mut report)?;
                 }
             }
@@ -1605,25 +1676,38 @@ impl<'a> Window<'a> {
                 for o in self.obs[..self.n_obs].iter_mut() {
                     o.factor = 1.0;
                 }
-                self.snoop(critical, 0);
-                let mut stable = false;
-                for round in 1..=self.cfg.max_robust_rounds {
-                    let (it, conv) = self.least_squares(max_it)?;
-                    report.iterations += it;
-                    report.converged = conv;
-                    report.robust_rounds += 1;
-                    if !self.snoop(critical, round) {
-                        stable = true;
-                        break;
-                    }
-                }
-                if !stable {
-                    // Out of rounds: the solution must match the final set.
-                    let (it, conv) = self.least_squares(max_it)?;
-                    report.iterations += it;
-                    report.converged = conv;
-                }
+                self.snoop_rounds(critical, 0, report)?;
             }
+        }
+        Ok(())
+    }
+
+    /// Snooping from the current solution until the excluded set is stable, then
+    /// a final solution for that set. `first_round` 1 skips the hysteresis-free start.
+    fn snoop_rounds(
+        &mut self,
+        critical: f64,
+        first_round: usize,
+        report: &mut Report,
+    ) -> Result<(), AdjustError> {
+        let max_it = self.cfg.max_iterations;
+        self.snoop(critical, first_round);
+        let mut stable = false;
+        for round in first_round + 1..=first_round + self.cfg.max_robust_rounds {
+            let (it, conv) = self.least_squares(max_it)?;
+            report.iterations += it;
+            report.converged = conv;
+            report.robust_rounds += 1;
+            if !self.snoop(critical, round) {
+                stable = true;
+                break;
+            }
+        }
+        if !stable {
+            // Out of rounds: the solution must match the final set.
+            let (it, conv) = self.least_squares(max_it)?;
+            report.iterations += it;
+            report.converged = conv;
         }
         Ok(())
     }
@@ -1662,13 +1746,17 @@ impl<'a> Window<'a> {
     /// the excluded set changed.
     fn snoop(&mut self, critical: f64, round: usize) -> bool {
         self.statistics();
-        let n = self.n_obs;
+        let scale2 = self.median_scale();
+        self.apply_flags(critical, round, scale2)
+    }
+
+    /// Median of the accepted observations' `T` (in `residuals`) over chi2_2's median:
+    /// 1 when the weights match the noise, and right also with the seed's weights
+    /// whose scale is arbitrary. Selected in place (no copy of the residuals).
+    fn median_scale(&self) -> f64 {
         let (res, obs) = (&*self.residuals, &*self.obs);
         let used = |i: usize| (obs[i].factor > 0.0 && res[i].is_finite()).then_some(res[i]);
-        // Median scale: 1 when the weights match the noise, and right also
-        // with the seed's weights whose scale is arbitrary.
-        let scale2 = (median_by_rank(n, used) / CHI2_2_MEDIAN).max(1e-30);
-        self.apply_flags(critical, round, scale2)
+        (median_by_rank(self.n_obs, used) / CHI2_2_MEDIAN).max(1e-30)
     }
 
     /// Detection (Baarda's DIA order): after plain least squares, the data are
@@ -1678,16 +1766,23 @@ impl<'a> Window<'a> {
     fn detection_passes(&mut self) -> Result<bool, AdjustError> {
         let mut r = Report::default();
         self.quality(&mut r)?;
-        if !r.chi2.passed {
+        // Only the upper tail is evidence of blunders; a sigma0 below its bound says
+        // the a-priori sigma was pessimistic, and identification would be wasted work.
+        if r.chi2.statistic > r.chi2.upper {
             return Ok(false);
         }
         self.statistics();
+        let scale2 = self.median_scale();
         let n = self.n_obs.max(1) as f64;
         let bound = -2.0 * libm::log(0.05 / n);
         let worst = self.residuals[..self.n_obs]
             .iter()
-            .fold(0.0f64, |m, t| m.max(*t));
-        Ok(worst <= bound)
+            .enumerate()
+            .filter(|(i, _)| self.obs[*i].factor > 0.0)
+            .fold(0.0f64, |m, (_, t)| m.max(*t));
+        // On the median scale, as snooping: a pessimistic a-priori sigma must not
+        // hide blunders that stand out of the actual noise.
+        Ok(worst <= bound * scale2)
     }
 
     /// `T` of every observation into `residuals` (a-priori scale).
@@ -1870,9 +1965,12 @@ impl<'a> Window<'a> {
         }
         if let Some(rb) = rig_block {
             for i in 0..6 {
-                self.rig_std[i] =
-                    libm::sqrt((s02 * self.reduced[(6 * rb + i) * nc + 6 * rb + i]).max(0.0));
+                for j in 0..6 {
+                    self.rig_cov[i * 6 + j] = self.reduced[(6 * rb + i) * nc + 6 * rb + j];
+                }
+                self.rig_std[i] = libm::sqrt((s02 * self.rig_cov[i * 6 + i]).max(0.0));
             }
+            self.rig_cov_valid = true;
         }
         // Points: Q_pp = V^-1 + V^-1 W^T Q_cc W V^-1.
         for p in 0..self.n_point_slots {

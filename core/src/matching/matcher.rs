@@ -694,6 +694,12 @@ impl<'a> Matcher<'a> {
         })
     }
 
+    /// Replaces the current-epoch positions of the tie point in track `slot` (after a
+    /// refinement the matcher cannot do, e.g. against the previous epoch's image).
+    pub fn refine_tie_point(&mut self, slot: u32, left: [f32; 2], right: [f32; 2]) -> bool {
+        self.tracks.set_positions(slot, self.epoch, left, right)
+    }
+
     /// The quads of the last accepted epoch (keypoint indices of the four images).
     pub fn quads(&self) -> &[Quad] {
         &self.quads[..self.n_tie]

@@ -95,44 +95,71 @@ pub fn refine_match(
     cfg: &RefineConfig,
 ) -> Result<([f32; 2], f32), RefineError> {
     let h = (cfg.half_window as usize).min(MAX_REFINE_HALF);
-    let rad = (cfg.search_radius as usize).clamp(1, MAX_REFINE_RADIUS);
-    let n = 2 * h + 1;
+    let mut tpl = [0f32; TEMPLATE_LEN];
+    sample_template(left_img, left, h, &mut tpl)?;
     let centre = if cfg.rows_only {
         [right[0], left[1]]
     } else {
         right
     };
-    let hf = h as f32;
-    let all_finite = left.iter().chain(centre.iter()).all(|v| v.is_finite());
-    if !all_finite
-        || !inside(left_img, left[0], left[1], hf)
-        || !inside(right_img, centre[0], centre[1], hf + rad as f32 + 1.0)
-    {
+    let rad = (cfg.search_radius as usize).clamp(1, MAX_REFINE_RADIUS);
+    let (rx, ry) = if cfg.rows_only { (rad, 0) } else { (rad, rad) };
+    correlate(&tpl, h, right_img, centre, (rx, ry), cfg.min_ncc)
+}
+
+/// Values of the largest template ([`MAX_REFINE_HALF`]).
+pub const TEMPLATE_LEN: usize = T * T;
+
+/// Samples the `(2h + 1)^2` template around `at` (bilinear) into `tpl`, row by row.
+pub fn sample_template(
+    img: &ImageView<'_>,
+    at: [f32; 2],
+    h: usize,
+    tpl: &mut [f32; TEMPLATE_LEN],
+) -> Result<(), RefineError> {
+    let h = h.min(MAX_REFINE_HALF);
+    let (n, hf) = (2 * h + 1, h as f32);
+    if !at.iter().all(|v| v.is_finite()) || !inside(img, at[0], at[1], hf) {
         return Err(RefineError::Border);
     }
-    // Template, zero-mean, and its norm.
-    let mut tpl = [0f32; T * T];
-    let mut mean = 0f32;
     for v in 0..n {
         for u in 0..n {
-            let x = left[0] + u as f32 - hf;
-            let y = left[1] + v as f32 - hf;
-            let s = bilinear(left_img, x, y);
-            tpl[v * n + u] = s;
-            mean += s;
+            tpl[v * n + u] = bilinear(img, at[0] + u as f32 - hf, at[1] + v as f32 - hf);
         }
     }
+    Ok(())
+}
+
+/// Correlates the template `tpl` (half-size `h`, as [`sample_template`] wrote it) with
+/// `img` at whole-pixel offsets up to `(rx, ry)` around `centre`; a parabola through the
+/// peak and its neighbours gives the sub-pixel position on each searched axis.
+pub fn correlate(
+    tpl: &[f32; TEMPLATE_LEN],
+    h: usize,
+    img: &ImageView<'_>,
+    centre: [f32; 2],
+    (rx, ry): (usize, usize),
+    min_ncc: f32,
+) -> Result<([f32; 2], f32), RefineError> {
+    let h = h.min(MAX_REFINE_HALF);
+    let (rx, ry) = (rx.min(MAX_REFINE_RADIUS), ry.min(MAX_REFINE_RADIUS));
+    let (n, hf) = (2 * h + 1, h as f32);
+    let reach = hf + rx.max(ry) as f32 + 1.0;
+    if !centre.iter().all(|v| v.is_finite()) || !inside(img, centre[0], centre[1], reach) {
+        return Err(RefineError::Border);
+    }
+    // Zero-mean template and its norm.
     let cnt = (n * n) as f32;
-    mean /= cnt;
+    let mean = tpl[..n * n].iter().sum::<f32>() / cnt;
+    let mut zt = [0f32; TEMPLATE_LEN];
     let mut tnorm = 0f32;
-    for t in tpl[..n * n].iter_mut() {
-        *t -= mean;
-        tnorm += *t * *t;
+    for (z, &t) in zt.iter_mut().zip(&tpl[..n * n]) {
+        *z = t - mean;
+        tnorm += *z * *z;
     }
     if tnorm < 1e-3 * cnt {
         return Err(RefineError::Flat);
     }
-    let (rx, ry) = if cfg.rows_only { (rad, 0) } else { (rad, rad) };
     let mut score = [f32::MIN; S * S];
     let mut best = (0usize, 0usize, f32::MIN);
     for oy in 0..=2 * ry {
@@ -142,10 +169,10 @@ pub fn refine_match(
             let (mut sum, mut sum2, mut cross) = (0f32, 0f32, 0f32);
             for v in 0..n {
                 for u in 0..n {
-                    let s = bilinear(right_img, cx + u as f32, cy + v as f32);
+                    let s = bilinear(img, cx + u as f32, cy + v as f32);
                     sum += s;
                     sum2 += s * s;
-                    cross += s * tpl[v * n + u];
+                    cross += s * zt[v * n + u];
                 }
             }
             let var = sum2 - sum * sum / cnt;
@@ -161,7 +188,7 @@ pub fn refine_match(
         }
     }
     let (bx, by, peak) = best;
-    if peak < cfg.min_ncc {
+    if peak < min_ncc {
         return Err(RefineError::LowScore);
     }
     if bx == 0 || bx == 2 * rx || (ry > 0 && (by == 0 || by == 2 * ry)) {

@@ -102,6 +102,22 @@ impl<'a> Tracks<'a> {
         (o.epoch == epoch).then_some(o)
     }
 
+    /// Replaces the positions of track `slot` at `epoch` (a later refinement of the
+    /// same observation); false when the track has no observation there.
+    pub fn set_positions(
+        &mut self,
+        slot: u32,
+        epoch: u32,
+        left: [f32; 2],
+        right: [f32; 2],
+    ) -> bool {
+        if self.observation(slot, epoch).is_none() {
+            return false;
+        }
+        self.record(slot as usize, Observation { epoch, left, right });
+        true
+    }
+
     /// Mean length (epochs) over every track that ended so far and the live ones.
     pub fn mean_length(&self) -> f64 {
         let (mut sum, mut n) = (self.ended_length, self.ended_count);

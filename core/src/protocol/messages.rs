@@ -4,6 +4,7 @@
 //! `docs/protocol.md`; each struct below lists its fields in wire order.
 use super::packet::EncodeError;
 use crate::camera::{Interior, Rig};
+pub use crate::traverse::TraverseMode;
 
 /// Message type byte of the header.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -295,7 +296,7 @@ repr!(
 
 /// Payload version of [`Configure`] this build writes. Later versions append
 /// fields; a parser reads the fields it knows and ignores the rest.
-pub const CONFIG_VERSION: u16 = 1;
+pub const CONFIG_VERSION: u16 = 2;
 
 /// Pipeline capacities and thresholds, plain numbers the traverse maps to its config.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -334,12 +335,43 @@ impl Default for Pipeline {
     }
 }
 
+/// How the traverse adjusts (Configure v2; a v1 payload gets [`TraverseSettings::default`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TraverseSettings {
+    /// Window (the project's default) or one of the seed procedures.
+    pub mode: TraverseMode,
+    /// Estimate the relative orientation of the rig in the adjustment.
+    pub estimate_rig: bool,
+    /// A-priori standard deviation of an image measurement, pixels.
+    pub sigma_px: f64,
+    /// The datum: the left camera at epoch 0, omega, phi, kappa (rad), X, Y, Z (m).
+    pub datum: [f64; 6],
+}
+
+impl Default for TraverseSettings {
+    /// What a v1 firmware did: window mode, fixed rig, 0.5 px, a level camera
+    /// looking along +Y at the origin (omega 90 degrees).
+    fn default() -> Self {
+        TraverseSettings {
+            mode: TraverseMode::Window,
+            estimate_rig: false,
+            sigma_px: 0.5,
+            datum: [core::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0, 0.0, 0.0],
+        }
+    }
+}
+
+/// Bit 0 of the v2 flags byte: estimate the rig.
+const CONFIG_ESTIMATE_RIG: u8 = 1;
+
 /// Host -> firmware: the rig and the pipeline. Answered by ConfigAccepted or Error.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Configure {
     pub version: u16,
     pub rig: Rig,
     pub pipeline: Pipeline,
+    /// Version 2 fields (defaults when the payload is version 1).
+    pub traverse: TraverseSettings,
 }
 
 fn parse_interior(r: &mut Reader) -> Result<Interior, ParseError> {
@@ -392,12 +424,23 @@ repr!(
             match_ratio: r.f32()?,
             max_disparity_px: r.f32()?,
         };
+        let mut traverse = TraverseSettings::default();
+        if version >= 2 {
+            let code = r.u8()?;
+            let flags = r.u8()?;
+            traverse.sigma_px = r.f64()?;
+            traverse.datum = r.f64s()?;
+            traverse.mode =
+                TraverseMode::from_code(code).ok_or(ParseError::Invalid("traverse mode"))?;
+            traverse.estimate_rig = flags & CONFIG_ESTIMATE_RIG != 0;
+        }
         // Fields of later versions follow; this build ignores them.
         let _ = r.rest();
         Ok(Configure {
             version,
             rig,
             pipeline,
+            traverse,
         })
     },
     |s, w| {
@@ -419,6 +462,18 @@ repr!(
         w.f32(p.edge_ratio)?;
         w.f32(p.match_ratio)?;
         w.f32(p.max_disparity_px)?;
+        // A version-1 message carries only the fields above.
+        if s.version >= 2 {
+            let t = &s.traverse;
+            w.u8(t.mode.code())?;
+            w.u8(if t.estimate_rig {
+                CONFIG_ESTIMATE_RIG
+            } else {
+                0
+            })?;
+            w.f64(t.sigma_px)?;
+            w.f64s(&t.datum)?;
+        }
     }
 );
 
@@ -690,6 +745,40 @@ pub struct EpochResult {
     /// Processor-defined summary values (for the statistics processor: mean and
     /// gradient energy of each image).
     pub extra: [f64; 4],
+    /// Optional trailing block: the rig as estimated by the adjustment (sent only
+    /// when the configuration estimates it; older parsers ignore it).
+    pub rig: Option<RigEstimate>,
+}
+
+/// The relative orientation estimated with an epoch. `f32` on the wire keeps a
+/// Result within a 256-byte transmit slot; the values are small (angles of a few
+/// mrad, a base under a few metres), so `f32` keeps nanoradians and tens of nanometres.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RigEstimate {
+    /// Relative angles omega, phi, kappa (rad) and base bx, by, bz (m), as in [`Rig`].
+    pub params: [f32; 6],
+    /// Their standard deviations (zero when not available).
+    pub std: [f32; 6],
+}
+
+impl RigEstimate {
+    fn parse(r: &mut Reader) -> Result<Self, ParseError> {
+        let mut v = [0f32; 12];
+        for x in v.iter_mut() {
+            *x = r.f32()?;
+        }
+        Ok(RigEstimate {
+            params: core::array::from_fn(|i| v[i]),
+            std: core::array::from_fn(|i| v[6 + i]),
+        })
+    }
+
+    fn emit(&self, w: &mut Writer) -> Result<(), EncodeError> {
+        for x in self.params.iter().chain(self.std.iter()) {
+            w.f32(*x)?;
+        }
+        Ok(())
+    }
 }
 
 impl EpochResult {
@@ -702,6 +791,7 @@ impl EpochResult {
             sigma0: 0.0,
             counts: Counts::default(),
             extra: [0.0; 4],
+            rig: None,
         }
     }
 }
@@ -725,6 +815,11 @@ repr!(
                 dropped: r.u32()?,
             },
             extra: r.f64s()?,
+            rig: if r.remaining() > 0 {
+                Some(RigEstimate::parse(&mut r)?)
+            } else {
+                None
+            },
         })
     },
     |s, w| {
@@ -743,6 +838,9 @@ repr!(
             c.dropped,
         ])?;
         w.f64s(&s.extra)?;
+        if let Some(rig) = &s.rig {
+            rig.emit(&mut w)?;
+        }
     }
 );
 

@@ -32,6 +32,12 @@ fn sample_messages(chunk: &[u8]) -> [Message<'_>; 14] {
             version: CONFIG_VERSION,
             rig,
             pipeline: Pipeline::default(),
+            traverse: TraverseSettings {
+                mode: TraverseMode::Seed2006,
+                estimate_rig: true,
+                sigma_px: 0.7,
+                datum: [1.5, 0.01, -0.02, 10.0, 20.0, 2.2],
+            },
         }),
         Message::ConfigAccepted(ConfigAccepted {
             predicted_bytes: 1,
@@ -81,6 +87,7 @@ fn sample_messages(chunk: &[u8]) -> [Message<'_>; 14] {
                 dropped: 3,
             },
             extra: [1.0, 2.0, 3.0, 4.0],
+            rig: None,
         }),
         Message::Stats(Stats {
             epoch: 7,
@@ -178,14 +185,91 @@ fn truncated_payloads_are_refused_not_panicking() {
 fn configure_ignores_fields_of_later_versions() {
     let rig = Rig::rectified(Interior::pinhole_px(320, 240, 300.0), 0.3);
     let cfg = Configure {
-        version: 2,
+        version: 3,
         rig,
         pipeline: Pipeline::default(),
+        traverse: TraverseSettings {
+            mode: TraverseMode::Seed2014,
+            ..TraverseSettings::default()
+        },
     };
     let mut payload = [0u8; 512];
     let n = cfg.emit(&mut payload).unwrap();
     payload[n..n + 8].copy_from_slice(&[9; 8]);
     assert_eq!(Configure::parse(&payload[..n + 8]).unwrap(), cfg);
+}
+
+#[test]
+fn configure_v2_round_trips_and_v1_payloads_get_the_v1_behaviour() {
+    let rig = Rig::rectified(Interior::pinhole_px(320, 240, 300.0), 0.3);
+    let v2 = Configure {
+        version: 2,
+        rig,
+        pipeline: Pipeline::default(),
+        traverse: TraverseSettings {
+            mode: TraverseMode::Seed2014,
+            estimate_rig: true,
+            sigma_px: 0.25,
+            datum: [1.6, -0.02, 0.03, 100.0, -50.0, 1.5],
+        },
+    };
+    let mut payload = [0u8; 512];
+    let n = v2.emit(&mut payload).unwrap();
+    assert_eq!(n, 301);
+    assert_eq!(Configure::parse(&payload[..n]).unwrap(), v2);
+    // Every mode code survives; an unknown one is refused by name.
+    for mode in [TraverseMode::Window, TraverseMode::Seed2006] {
+        let c = Configure {
+            traverse: TraverseSettings {
+                mode,
+                ..v2.traverse
+            },
+            ..v2
+        };
+        let n = c.emit(&mut payload).unwrap();
+        assert_eq!(Configure::parse(&payload[..n]).unwrap(), c);
+    }
+    payload[243] = 9;
+    assert_eq!(
+        Configure::parse(&payload[..n]),
+        Err(ParseError::Invalid("traverse mode"))
+    );
+    // A version-1 writer stops after the pipeline (243 bytes); the reader fills
+    // the version-1 behaviour in: window mode, fixed rig, 0.5 px, omega 90 deg.
+    let v1 = Configure { version: 1, ..v2 };
+    let n1 = v1.emit(&mut payload).unwrap();
+    assert_eq!(n1, 243);
+    let back = Configure::parse(&payload[..n1]).unwrap();
+    assert_eq!(back.rig, v2.rig);
+    assert_eq!(back.pipeline, v2.pipeline);
+    assert_eq!(back.traverse, TraverseSettings::default());
+    assert_eq!(back.traverse.mode, TraverseMode::Window);
+    assert!(!back.traverse.estimate_rig);
+    assert!((back.traverse.datum[0] - core::f64::consts::FRAC_PI_2).abs() < 1e-15);
+}
+
+#[test]
+fn result_rig_block_is_optional_and_complete_when_present() {
+    let mut r = EpochResult::empty(3, status::OK);
+    r.sigma0 = 1.1;
+    let mut payload = [0u8; 512];
+    let n = r.emit(&mut payload).unwrap();
+    assert_eq!(n, 169);
+    assert_eq!(EpochResult::parse(&payload[..n]).unwrap(), r);
+    r.rig = Some(RigEstimate {
+        params: [0.001, -0.002, 0.003, 0.4, 0.001, -0.002],
+        std: [1e-4, 2e-4, 3e-4, 1e-3, 2e-3, 3e-3],
+    });
+    let n = r.emit(&mut payload).unwrap();
+    assert_eq!(n, 217);
+    assert_eq!(EpochResult::parse(&payload[..n]).unwrap(), r);
+    for cut in 170..n {
+        assert_eq!(
+            EpochResult::parse(&payload[..cut]),
+            Err(ParseError::Truncated),
+            "cut at {cut}"
+        );
+    }
 }
 
 #[test]

@@ -1,12 +1,13 @@
 //! Configuration of the whole traverse and its memory budget.
-use crate::adjust::{AdjustConfig, ConstraintSigmas, Correspondence, ResectionConfig};
+use crate::adjust::{AdjustConfig, ConstraintSigmas, Correspondence, ResectionConfig, Robust};
 use crate::budget::{slice_bytes, ComponentKind, MemoryBudget};
 use crate::camera::{Pose, Rig};
 use crate::features::FeatureSet;
-use crate::matching::{MatchConfig, StereoGeometry};
+use crate::matching::{MatchConfig, RefineConfig, StereoGeometry};
 use crate::sift::SiftConfig;
 
-use super::TrackPoint;
+use super::patches::Patches;
+use super::{Refined, TrackPoint};
 
 /// Tie points per epoch at most (the spreading keeps the best spread ones).
 pub const MAX_TIE_POINTS: usize = 400;
@@ -38,6 +39,9 @@ pub struct TraverseConfig {
     /// Prior standard deviations (angles rad, positions m) tying an epoch that the images
     /// do not determine (lost track) to its motion prediction.
     pub prediction_sigmas: [f64; 6],
+    /// Refine each tie point's current left position against the previous epoch's
+    /// template (needs `matching.refine`; see `traverse::patches`).
+    pub temporal_refine: bool,
 }
 
 impl TraverseConfig {
@@ -67,6 +71,10 @@ impl TraverseConfig {
                 max_depth_m: f64::INFINITY,
             };
         }
+        matching.refine = Some(RefineConfig {
+            rows_only: matches!(matching.stereo, StereoGeometry::Rectified { .. }),
+            ..RefineConfig::default()
+        });
         matching.max_tie_points = MAX_TIE_POINTS;
         matching.max_tracks = 600;
         let window = 8;
@@ -84,7 +92,10 @@ impl TraverseConfig {
                 velocity_change_mps: 0.5,
                 ..ConstraintSigmas::default()
             },
-            tolerance: 1e-10,
+            // Each epoch starts from the last solution: a relative decrease of 1e-6
+            // moves the poses by far less than their sigma.
+            tolerance: 1e-6,
+            keep_exclusions: true,
             ..AdjustConfig::default()
         };
         let mut cfg = TraverseConfig {
@@ -97,8 +108,11 @@ impl TraverseConfig {
             sigma_px: 0.5,
             min_tie_points: 12,
             min_ray_angle_rad: 0.05f64.to_radians(),
-            max_depth_m: 200.0,
+            // Far points carry the attitude; only points at practically infinite
+            // distance (where the ray angle test already refuses them) are left out.
+            max_depth_m: 1000.0,
             prediction_sigmas: [0.01, 0.01, 0.01, 0.3, 0.3, 0.3],
+            temporal_refine: true,
         };
         cfg.fit_capacities();
         cfg
@@ -181,6 +195,14 @@ impl TraverseConfig {
             ComponentKind::Storage,
             slice_bytes::<TrackPoint>(self.matching.max_tracks),
         );
+        if let Some((cap, half)) = self.patch_capacity() {
+            Patches::budget(cap, half, budget);
+            budget.add(
+                "traverse.refined",
+                ComponentKind::Working,
+                slice_bytes::<Refined>(self.matching.max_tie_points),
+            );
+        }
         budget.add(
             "traverse.correspondences",
             ComponentKind::Working,
@@ -189,10 +211,200 @@ impl TraverseConfig {
         Ok(())
     }
 
+    /// Templates kept for the temporal refinement (capacity, half-size), if it is on.
+    pub fn patch_capacity(&self) -> Option<(usize, usize)> {
+        let r = self.matching.refine.as_ref()?;
+        self.temporal_refine
+            .then_some((self.matching.max_tie_points, r.half_window as usize))
+    }
+
     /// Total bytes of the budget (frames excluded).
     pub fn total_bytes(&self) -> Result<usize, crate::sift::SiftError> {
         let mut b = MemoryBudget::new();
         self.budget(&mut b)?;
         Ok(b.total())
+    }
+}
+
+/// How the traverse adjusts: the project's sliding window or one of the seed
+/// procedures (docs/configuration.md, "Traverse modes").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TraverseMode {
+    /// The project's default: an 8-epoch sliding window, robust snooping, base-length
+    /// and smoothness constraints.
+    #[default]
+    Window,
+    /// Seed 000 (Lemes Neto 2014): four-image sequences (two epochs), base-length
+    /// constraints on both pairs, plain least squares then one re-weighting of the
+    /// observations whose x residual exceeds the pixel size (weight 1e-5).
+    Seed2014,
+    /// Seed 002 (Barbosa 2006) strategy 4: all bases of a 7-base traverse adjusted
+    /// together, one base-length constraint per base (variance 0.001 m^2) and a
+    /// velocity constraint between consecutive bases (0.5 m^2/s^2), plain least
+    /// squares, at most 20 iterations.
+    Seed2006,
+}
+
+impl TraverseMode {
+    /// Wire code (protocol `Configure` v2).
+    pub const fn code(self) -> u8 {
+        match self {
+            TraverseMode::Window => 0,
+            TraverseMode::Seed2014 => 1,
+            TraverseMode::Seed2006 => 2,
+        }
+    }
+
+    pub const fn from_code(code: u8) -> Option<Self> {
+        match code {
+            0 => Some(TraverseMode::Window),
+            1 => Some(TraverseMode::Seed2014),
+            2 => Some(TraverseMode::Seed2006),
+            _ => None,
+        }
+    }
+
+    /// Lower-case name used on the command line and in reports.
+    pub const fn name(self) -> &'static str {
+        match self {
+            TraverseMode::Window => "window",
+            TraverseMode::Seed2014 => "seed2014",
+            TraverseMode::Seed2006 => "seed2006",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        [
+            TraverseMode::Window,
+            TraverseMode::Seed2014,
+            TraverseMode::Seed2006,
+        ]
+        .into_iter()
+        .find(|m| m.name() == name)
+    }
+}
+
+/// Seed 002 Table 14: base variance 0.001 m^2.
+pub const SEED2006_BASE_SIGMA_M: f64 = 0.031_622_776_601_683_79;
+/// Seed 002 Table 14 / Quadro 1: velocity variance 0.5 m^2/s^2.
+pub const SEED2006_VELOCITY_SIGMA_MPS: f64 = core::f64::consts::FRAC_1_SQRT_2;
+/// Seed 002: "the limit of 7 bases" adjusted together.
+pub const SEED2006_BASES: usize = 7;
+/// Seed 002 Table 14: at most 20 iterations.
+pub const SEED2006_MAX_ITERATIONS: usize = 20;
+/// Seed 000 Quadro 4: the first pair's parameters carry variance 1e-6 (sigma 1e-3).
+pub const SEED2014_DATUM_SIGMA: f64 = 1e-3;
+/// Seed 000 leaves the base-length variance unstated; 1 mm keeps the bar rigid
+/// against the image observations without overriding them.
+pub const SEED2014_BASE_SIGMA_M: f64 = 1e-3;
+
+impl TraverseConfig {
+    /// The settings of `mode` applied to this configuration (capacities untouched
+    /// except the window length and the track history that follows it).
+    ///
+    /// - `Window`: unchanged.
+    /// - `Seed2014`: window 2 (four images), `Robust::SeedReweight` with the pixel
+    ///   size as threshold (one re-run), base-length sigma 1 mm, no smoothness
+    ///   constraint, datum sigmas 1e-3 (Quadro 4's variance 1e-6).
+    /// - `Seed2006`: window 7 (bases), `Robust::None`, base-length sigma
+    ///   sqrt(0.001) m, velocity-change sigma sqrt(0.5) m/s, at most 20 iterations.
+    ///
+    /// `estimate_rig` is orthogonal to the mode and left as it is.
+    pub fn with_mode(mut self, mode: TraverseMode) -> Self {
+        let a = &mut self.adjust;
+        match mode {
+            TraverseMode::Window => return self,
+            TraverseMode::Seed2014 => {
+                a.window = 2;
+                a.robust = Robust::SeedReweight {
+                    threshold_mm: self.rig.left.pixel_size_mm[0],
+                };
+                a.sigmas.base_length_m = SEED2014_BASE_SIGMA_M;
+                a.sigmas.velocity_change_mps = 0.0;
+                a.sigmas.datum_angle_rad = SEED2014_DATUM_SIGMA;
+                a.sigmas.datum_position_m = SEED2014_DATUM_SIGMA;
+            }
+            TraverseMode::Seed2006 => {
+                a.window = SEED2006_BASES;
+                a.robust = Robust::None;
+                a.sigmas.base_length_m = SEED2006_BASE_SIGMA_M;
+                a.sigmas.velocity_change_mps = SEED2006_VELOCITY_SIGMA_MPS;
+                a.max_iterations = SEED2006_MAX_ITERATIONS;
+            }
+        }
+        self.matching.track_history = a.window;
+        self
+    }
+}
+
+#[cfg(test)]
+mod mode_tests {
+    use super::*;
+    use crate::camera::Interior;
+
+    fn base() -> TraverseConfig {
+        let rig = Rig::rectified(Interior::pinhole_px(640, 480, 500.0), 0.4);
+        TraverseConfig::for_rig(rig, Pose::from_degrees(90.0, 0.0, 0.0, [0.0; 3]))
+    }
+
+    #[test]
+    fn window_mode_changes_nothing() {
+        assert_eq!(base().with_mode(TraverseMode::Window), base());
+    }
+
+    #[test]
+    fn seed2014_is_two_epochs_with_one_seed_reweighting() {
+        let b = base();
+        let c = b.with_mode(TraverseMode::Seed2014);
+        assert_eq!(c.adjust.window, 2);
+        assert_eq!(c.matching.track_history, 2);
+        assert_eq!(
+            c.adjust.robust,
+            Robust::SeedReweight {
+                threshold_mm: b.rig.left.pixel_size_mm[0]
+            }
+        );
+        assert_eq!(c.adjust.sigmas.base_length_m, 1e-3);
+        assert_eq!(c.adjust.sigmas.velocity_change_mps, 0.0);
+        // Quadro 4: variance 1e-6 on the first pair.
+        assert_eq!(c.adjust.sigmas.datum_angle_rad.powi(2), 1e-6);
+        assert_eq!(c.adjust.sigmas.datum_position_m.powi(2), 1e-6);
+        // Capacities and the rest untouched.
+        assert_eq!(c.adjust.max_points, b.adjust.max_points);
+        assert_eq!(c.adjust.estimate_rig, b.adjust.estimate_rig);
+        assert_eq!((c.sift, c.sigma_px), (b.sift, b.sigma_px));
+    }
+
+    #[test]
+    fn seed2006_is_seven_bases_with_base_and_velocity_constraints() {
+        let b = base();
+        let c = b.with_mode(TraverseMode::Seed2006);
+        assert_eq!(c.adjust.window, 7);
+        assert_eq!(c.matching.track_history, 7);
+        assert_eq!(c.adjust.robust, Robust::None);
+        assert_eq!(c.adjust.max_iterations, 20);
+        // Table 14: base variance 0.001 m^2, velocity variance 0.5 m^2/s^2.
+        assert!((c.adjust.sigmas.base_length_m.powi(2) - 0.001).abs() < 1e-15);
+        assert!((c.adjust.sigmas.velocity_change_mps.powi(2) - 0.5).abs() < 1e-15);
+        assert_eq!(
+            c.adjust.sigmas.datum_angle_rad,
+            b.adjust.sigmas.datum_angle_rad
+        );
+        // A budget still exists for the longer history.
+        assert!(c.total_bytes().unwrap() > 0);
+    }
+
+    #[test]
+    fn mode_codes_and_names_round_trip() {
+        for m in [
+            TraverseMode::Window,
+            TraverseMode::Seed2014,
+            TraverseMode::Seed2006,
+        ] {
+            assert_eq!(TraverseMode::from_code(m.code()), Some(m));
+            assert_eq!(TraverseMode::from_name(m.name()), Some(m));
+        }
+        assert_eq!(TraverseMode::from_code(3), None);
+        assert_eq!(TraverseMode::from_name("seed"), None);
     }
 }

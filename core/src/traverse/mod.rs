@@ -19,11 +19,12 @@
 pub mod config;
 pub mod motion;
 pub mod output;
+pub mod patches;
 
 #[cfg(test)]
 mod tests;
 
-pub use config::TraverseConfig;
+pub use config::{TraverseConfig, TraverseMode};
 pub use output::{flags, EpochOutput, EpochStatus, StageTimes};
 
 use crate::adjust::geometry::camera_pose;
@@ -34,6 +35,7 @@ use crate::budget::{Arena, OutOfMemory};
 use crate::camera::Pose;
 use crate::features::FeatureSet;
 use crate::image::ImageView;
+use crate::matching::refine::{correlate, refine_checked, TEMPLATE_LEN};
 use crate::matching::{
     relative_motion, EpochStatus as MatchStatus, Features, MatchError, Matcher, StereoFeatures,
     TiePoint,
@@ -41,6 +43,7 @@ use crate::matching::{
 use crate::sift::{Sift, SiftError};
 use bytemuck::{Pod, Zeroable};
 use motion::predict;
+use patches::Patches;
 
 /// Microsecond time source for the per-stage timings (the DWT cycle counter on a
 /// Cortex-M, `Instant` on the host). [`NoClock`] reports zeros.
@@ -63,6 +66,15 @@ impl Clock for NoClock {
 pub struct TrackPoint {
     pub track_id: u32,
     pub point: u32,
+}
+
+/// A tie point's refined current positions, waiting to be written to its track.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct Refined {
+    pub slot: u32,
+    pub left: [f32; 2],
+    pub right: [f32; 2],
 }
 
 const NO_POINT: TrackPoint = TrackPoint {
@@ -141,6 +153,9 @@ pub struct Traverse<'a> {
     window: Window<'a>,
     track_points: &'a mut [TrackPoint],
     corr: &'a mut [Correspondence],
+    /// Templates of the last accepted epoch's left image (temporal refinement).
+    patches: Option<Patches<'a>>,
+    refined: &'a mut [Refined],
     /// Input epoch index of each window slot (oldest first).
     window_inputs: &'a mut [u32],
     epochs: u32,
@@ -166,6 +181,13 @@ impl<'a> Traverse<'a> {
         window.set_base_length(cfg.rig.base_length());
         let track_points = arena.alloc_slice::<TrackPoint>(cfg.matching.max_tracks)?;
         track_points.fill(NO_POINT);
+        let (patches, refined) = match cfg.patch_capacity() {
+            Some((cap, half)) => (
+                Some(Patches::new(arena, cap, half)?),
+                arena.alloc_slice::<Refined>(cfg.matching.max_tie_points)?,
+            ),
+            None => (None, Default::default()),
+        };
         let corr = arena.alloc_slice::<Correspondence>(cfg.matching.max_tie_points)?;
         let window_inputs = arena.alloc_slice::<u32>(cfg.adjust.window)?;
         Ok(Traverse {
@@ -177,6 +199,8 @@ impl<'a> Traverse<'a> {
             window,
             track_points,
             corr,
+            patches,
+            refined,
             window_inputs,
             epochs: 0,
             have_prev: false,
@@ -218,6 +242,12 @@ impl<'a> Traverse<'a> {
                     self.window.point_std(t.point),
                 ))
             })
+    }
+
+    /// The rig as the adjustment has it (the calibration when it is not estimated)
+    /// and its standard deviations (zero when fixed).
+    pub fn rig_estimate(&self) -> (crate::adjust::RigParams, [f64; 6]) {
+        (self.window.rig(), self.window.rig_std())
     }
 
     /// Right camera pose for a left pose, with the rig as last adjusted.
@@ -275,6 +305,10 @@ impl<'a> Traverse<'a> {
                 return self.finish(out, t0, clock);
             }
         };
+        if report.status != MatchStatus::RepeatedFrame {
+            self.refine_temporal(left, right);
+            self.store_patches(fill, left);
+        }
         let t2 = clock.now_us();
         out.times.matching_us = elapsed(t1, t2);
         out.stereo_matches = report.stereo.pass.matches;
@@ -382,6 +416,58 @@ impl<'a> Traverse<'a> {
             images,
             motion.as_ref().map(|m| (&self.cfg.rig, m)),
         )
+    }
+
+    /// Moves each tie point's current left position onto the spot its previous left
+    /// template shows, then re-refines the right position from there (see `patches`).
+    fn refine_temporal(&mut self, left: &ImageView, right: &ImageView) {
+        let (Some(patches), Some(rcfg)) = (&self.patches, self.cfg.matching.refine) else {
+            return;
+        };
+        let h = rcfg.half_window as usize;
+        let rad = rcfg.search_radius as usize;
+        let mut tpl = [0f32; TEMPLATE_LEN];
+        let mut n = 0;
+        for tie in self.matcher.tie_points() {
+            if n >= self.refined.len() || !patches.find(tie.prev.left, &mut tpl) {
+                continue;
+            }
+            let Ok((l, _)) = correlate(&tpl, h, left, tie.cur.left, (rad, rad), rcfg.min_ncc)
+            else {
+                continue;
+            };
+            let Ok((r, _)) = refine_checked(left, right, l, tie.cur.right, &rcfg) else {
+                continue;
+            };
+            self.refined[n] = Refined {
+                slot: tie.slot,
+                left: l,
+                right: r,
+            };
+            n += 1;
+        }
+        for r in self.refined[..n].iter() {
+            self.matcher.refine_tie_point(r.slot, r.left, r.right);
+        }
+    }
+
+    /// Keeps the templates the next epoch's tie points will start from: the tie points'
+    /// current (refined) positions and the other stereo matches' left keypoints.
+    fn store_patches(&mut self, fill: usize, left: &ImageView) {
+        let Some(patches) = &mut self.patches else {
+            return;
+        };
+        patches.clear();
+        for tie in self.matcher.tie_points() {
+            patches.push(left, tie.cur.left);
+        }
+        let quads = self.matcher.quads();
+        let kps = self.features[fill][0].keypoints();
+        for m in self.matcher.stereo_matches(kps) {
+            if !quads.iter().any(|q| q.cur_left == m.left) {
+                patches.push(left, m.left_px);
+            }
+        }
     }
 
     /// Initial values, window update and adjustment; true when the epoch was adjusted.

@@ -5,7 +5,7 @@
 use crate::commands::run::summary;
 use crate::dataset::Dataset;
 use crate::link::LinkOptions;
-use crate::pipeline::PipelineSettings;
+use crate::pipeline::{Mode, PipelineSettings};
 use crate::runner::{run_dataset, RunOptions};
 use crate::synth::{generate, SynthOptions};
 use anyhow::Context;
@@ -26,6 +26,12 @@ pub struct Args {
     /// Scene to synthesize (straight, curves, seed2014, seed2006, hard).
     #[arg(long, default_value = "straight")]
     pub scene: String,
+    /// Adjustment procedure.
+    #[arg(long, value_enum, default_value = "window")]
+    pub mode: Mode,
+    /// Estimate the rig's relative orientation and base in the adjustment.
+    #[arg(long)]
+    pub estimate_rig: bool,
     #[command(flatten)]
     pub link: LinkOptions,
 }
@@ -52,7 +58,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let results = out.join("run");
     let run = RunOptions {
         link: a.link,
-        settings: PipelineSettings::default(),
+        settings: PipelineSettings {
+            mode: a.mode,
+            estimate_rig: a.estimate_rig,
+            ..PipelineSettings::default()
+        },
         max_epochs: None,
         progress: std::io::stderr().is_terminal(),
     };

@@ -1,7 +1,7 @@
 //! `phototraverse run DATASET --out DIR`: orient every image of a stereo sequence.
 use crate::dataset::Dataset;
 use crate::link::LinkOptions;
-use crate::pipeline::PipelineSettings;
+use crate::pipeline::{Mode, PipelineSettings};
 use crate::runner::{run_dataset, RunOptions, RunOutcome};
 use anyhow::{Context, Result};
 use std::path::PathBuf;
@@ -20,6 +20,12 @@ pub struct Args {
     /// Pipeline settings (TOML; see docs/configuration.md).
     #[arg(long)]
     pub config: Option<PathBuf>,
+    /// Adjustment procedure (overrides the settings file's `mode`).
+    #[arg(long, value_enum)]
+    pub mode: Option<Mode>,
+    /// Estimate the rig's relative orientation and base in the adjustment.
+    #[arg(long)]
+    pub estimate_rig: bool,
     /// Process only the first N epochs.
     #[arg(long)]
     pub max_epochs: Option<usize>,
@@ -33,9 +39,14 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let ds = Dataset::open(&args.dataset)
         .with_context(|| format!("cannot open the dataset {}", args.dataset.display()))?;
+    let mut settings = PipelineSettings::load(args.config.as_deref())?;
+    if let Some(m) = args.mode {
+        settings.mode = m;
+    }
+    settings.estimate_rig |= args.estimate_rig;
     let opts = RunOptions {
         link: args.link.clone(),
-        settings: PipelineSettings::load(args.config.as_deref())?,
+        settings,
         max_epochs: args.max_epochs,
         progress: !args.quiet,
     };
@@ -49,11 +60,39 @@ pub fn run(args: Args) -> Result<()> {
 pub fn summary(o: &RunOutcome) -> String {
     let r = &o.report;
     let mut s = format!(
-        "{} epochs, {} flagged, median {:.1} ms per epoch in the firmware\n",
+        "mode {}: {} epochs, {} flagged, median {:.1} ms per epoch in the firmware\n",
+        r.mode,
         r.epochs.len(),
         r.flagged_epochs(),
         o.median_epoch_ms
     );
+    if let Some(q) = &r.quality {
+        s += &format!(
+            "sigma0 median {:.3} (max {:.3}); chi-square over {} adjusted epochs: {} passed, \
+             {} failed (above), {} below the lower bound\n",
+            q.sigma0_median, q.sigma0_max, q.adjusted, q.chi2_passed, q.chi2_failed, q.chi2_below
+        );
+    }
+    if let Some(g) = &r.rig {
+        let a = g.relative_angles_deg;
+        let b = g.base_m;
+        s += &format!(
+            "rig estimated: angles [{:.4}, {:.4}, {:.4}] deg (+- [{:.4}, {:.4}, {:.4}]), \
+             base [{:.5}, {:.5}, {:.5}] m (+- [{:.5}, {:.5}, {:.5}])\n",
+            a[0],
+            a[1],
+            a[2],
+            g.std[0],
+            g.std[1],
+            g.std[2],
+            b[0],
+            b[1],
+            b[2],
+            g.std[3],
+            g.std[4],
+            g.std[5]
+        );
+    }
     if let Some(total) = r.memory.iter().find(|m| m.name.starts_with("total")) {
         s += &format!(
             "memory: {:.1} KiB predicted, {} measured\n",

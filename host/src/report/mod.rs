@@ -12,5 +12,6 @@ mod records;
 pub use export::{write_efoto, write_eop_csv, write_ply};
 pub use html::write_html;
 pub use records::{
-    CameraEop, EpochRecord, EpochStatus, ImageMeasurement, MemoryLine, RunReport, TiePoint,
+    CameraEop, EpochRecord, EpochStatus, ImageMeasurement, MemoryLine, QualitySummary, RigReport,
+    RunReport, TiePoint,
 };

@@ -139,6 +139,39 @@ pub struct RunReport {
     pub evaluation: Option<serde_json::Value>,
     /// Link statistics (bytes, retransmissions, errors).
     pub link: Option<serde_json::Value>,
+    /// The rig as estimated by the adjustment (`--estimate-rig`), at the last epoch.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rig: Option<RigReport>,
+    /// sigma0 and the chi-square tests over all adjusted epochs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub quality: Option<QualitySummary>,
+}
+
+/// The estimated relative orientation and base, with the calibration it started from.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct RigReport {
+    /// Relative angles omega, phi, kappa (degrees), `M_R = Mrel M_L`.
+    pub relative_angles_deg: [f64; 3],
+    /// Base vector in the left camera frame (m).
+    pub base_m: [f64; 3],
+    /// Standard deviations: angles (degrees), base (m); zero when not available.
+    pub std: [f64; 6],
+    pub calibration_angles_deg: [f64; 3],
+    pub calibration_base_m: [f64; 3],
+}
+
+/// Quality of the adjustments of a run: per-epoch sigma0 and chi-square test outcomes.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct QualitySummary {
+    /// Epochs with an adjustment (sigma0 reported).
+    pub adjusted: usize,
+    pub sigma0_median: f64,
+    pub sigma0_max: f64,
+    /// Global test of each epoch's window adjustment: passed, failed (upper tail:
+    /// the epoch is flagged) and below the lower bound (a-priori sigma pessimistic).
+    pub chi2_passed: usize,
+    pub chi2_failed: usize,
+    pub chi2_below: usize,
 }
 
 impl RunReport {

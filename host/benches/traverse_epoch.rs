@@ -1,0 +1,203 @@
+//! Per-epoch time and accuracy of the core traverse on one core, without the link.
+//!
+//! `cargo bench -p phototraverse-host --bench traverse_epoch -- DATASET [KEY=VALUE ...]`
+//!
+//! Runs `Traverse::process` on every epoch of DATASET in this thread, timing each
+//! stage with the thread's CPU clock (so a loaded machine slows the wall clock, not
+//! the figures), and prints the median and 90th percentile per stage, the tie points
+//! per epoch and, when the dataset has `gt_poses.txt`, the KITTI drift. The OpenCV
+//! stereo-odometry peer of `bench/traverse/` runs on the same datasets.
+//!
+//! KEY=VALUE overrides the traverse configuration for experiments (keys listed by
+//! `--help`; `poses=FILE` writes the estimated KITTI poses); without them it runs the firmware's defaults for the dataset's rig.
+use phototraverse_core::budget::{Arena, MemoryBudget};
+use phototraverse_core::camera::kitti_from_pose;
+use phototraverse_core::traverse::{Clock, Traverse, TraverseConfig};
+use phototraverse_host::dataset::Dataset;
+use phototraverse_host::eval::evaluate;
+use std::path::PathBuf;
+
+/// Thread CPU time in microseconds.
+struct ThreadClock;
+
+impl Clock for ThreadClock {
+    fn now_us(&self) -> u64 {
+        let mut ts = libc::timespec {
+            tv_sec: 0,
+            tv_nsec: 0,
+        };
+        // SAFETY: clock_gettime writes the timespec we own.
+        unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+        ts.tv_sec as u64 * 1_000_000 + ts.tv_nsec as u64 / 1000
+    }
+}
+
+const KEYS: &str = "keypoints contrast window sigma_px max_iterations tolerance \
+                    robust_rounds ratio tie_points keep_exclusions fine_octave levels edge velocity_sigma robust max_depth min_ray_angle_deg refine temporal_refine min_ncc back_check";
+
+fn apply(cfg: &mut TraverseConfig, key: &str, value: &str) -> Result<(), String> {
+    let f = || {
+        value
+            .parse::<f64>()
+            .map_err(|e| format!("{key}={value}: {e}"))
+    };
+    match key {
+        "keypoints" => {
+            let n = f()? as usize;
+            cfg.sift.max_keypoints = n;
+            cfg.matching.max_keypoints = n;
+        }
+        "contrast" => cfg.sift.contrast_threshold = f()? as f32,
+        "window" => {
+            cfg.adjust.window = f()? as usize;
+            cfg.matching.track_history = cfg.adjust.window;
+        }
+        "sigma_px" => cfg.sigma_px = f()?,
+        "max_iterations" => cfg.adjust.max_iterations = f()? as usize,
+        "tolerance" => cfg.adjust.tolerance = f()?,
+        "robust_rounds" => cfg.adjust.max_robust_rounds = f()? as usize,
+        "ratio" => cfg.matching.ratio = f()? as f32,
+        "tie_points" => cfg.matching.max_tie_points = f()? as usize,
+        "fine_octave" => cfg.sift.fine_octave = f()? != 0.0,
+        "levels" => cfg.sift.levels = f()? as usize,
+        "edge" => cfg.sift.edge_threshold = f()? as f32,
+        "velocity_sigma" => cfg.adjust.sigmas.velocity_change_mps = f()?,
+        "robust" => {
+            cfg.adjust.robust = if f()? == 0.0 {
+                phototraverse_core::adjust::Robust::None
+            } else {
+                phototraverse_core::adjust::Robust::snooping()
+            }
+        }
+        "max_depth" => cfg.max_depth_m = f()?,
+        "min_ray_angle_deg" => cfg.min_ray_angle_rad = f()?.to_radians(),
+        "refine" => {
+            cfg.matching.refine =
+                (f()? != 0.0).then(|| phototraverse_core::matching::RefineConfig {
+                    rows_only: matches!(
+                        cfg.matching.stereo,
+                        phototraverse_core::matching::StereoGeometry::Rectified { .. }
+                    ),
+                    ..Default::default()
+                })
+        }
+        "temporal_refine" => cfg.temporal_refine = f()? != 0.0,
+        "min_ncc" => {
+            if let Some(r) = cfg.matching.refine.as_mut() {
+                r.min_ncc = f()? as f32;
+            }
+        }
+        "back_check" => {
+            if let Some(r) = cfg.matching.refine.as_mut() {
+                r.back_check_px = f()? as f32;
+            }
+        }
+        "keep_exclusions" => cfg.adjust.keep_exclusions = f()? != 0.0,
+        _ => return Err(format!("unknown key {key}; keys: {KEYS}")),
+    }
+    Ok(())
+}
+
+fn percentile(v: &mut [f64], p: f64) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * p).round() as usize]
+}
+
+fn main() -> Result<(), String> {
+    // cargo bench passes --bench; the dataset is the first other argument.
+    let args: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| a != "--bench")
+        .collect();
+    if args.is_empty() || args[0] == "--help" {
+        println!("usage: traverse_epoch DATASET [KEY=VALUE ...]\nkeys: {KEYS}");
+        return Ok(());
+    }
+    let ds = Dataset::open(&PathBuf::from(&args[0])).map_err(|e| e.to_string())?;
+    let mut cfg = TraverseConfig::for_rig(ds.rig, ds.datum);
+    let mut poses_out = None;
+    for kv in &args[1..] {
+        let (k, v) = kv
+            .split_once('=')
+            .ok_or(format!("{kv}: expected KEY=VALUE"))?;
+        if k == "poses" {
+            poses_out = Some(PathBuf::from(v));
+        } else {
+            apply(&mut cfg, k, v)?;
+        }
+    }
+    let mut budget = MemoryBudget::new();
+    cfg.budget(&mut budget).map_err(|e| format!("{e:?}"))?;
+    let mut store = vec![0u8; budget.total()];
+    let mut arena = Arena::new(&mut store);
+    let mut trav = Traverse::new(cfg, &mut arena).map_err(|e| e.to_string())?;
+
+    let names = [
+        "sift_left",
+        "sift_right",
+        "matching",
+        "initial",
+        "adjust",
+        "total",
+    ];
+    let mut stages: [Vec<f64>; 6] = Default::default();
+    let (mut ties, mut flagged) = (Vec::new(), 0usize);
+    let (mut iters, mut obs) = (Vec::new(), Vec::new());
+    let (mut kps, mut stereo) = (Vec::new(), Vec::new());
+    let mut poses = Vec::new();
+    for i in 0..ds.len() {
+        let (l, r) = ds.load_pair(i).map_err(|e| e.to_string())?;
+        let (lv, rv) = (l.view().unwrap(), r.view().unwrap());
+        let out = trav.process(
+            &lv,
+            &rv,
+            ds.epochs[i].time.unwrap_or(i as f64 * 0.1),
+            &ThreadClock,
+        );
+        let t = out.times;
+        let us = [
+            t.sift_left_us,
+            t.sift_right_us,
+            t.matching_us,
+            t.initial_us,
+            t.adjust_us,
+            t.total_us,
+        ];
+        for (s, v) in stages.iter_mut().zip(us) {
+            s.push(v as f64 / 1000.0);
+        }
+        ties.push(out.tie_points as f64);
+        iters.push(out.iterations as f64);
+        kps.push(out.keypoints[0] as f64);
+        stereo.push(out.stereo_matches as f64);
+        obs.push(out.observations as f64);
+        flagged += (out.flags != 0) as usize;
+        poses.push(kitti_from_pose(&ds.datum, &out.left));
+    }
+    println!("{} epochs of {}, one thread (CPU time)", ds.len(), args[0]);
+    println!("{:<12} {:>9} {:>9}", "stage", "median ms", "p90 ms");
+    for (n, s) in names.iter().zip(stages.iter_mut()) {
+        let (m, p) = (percentile(s, 0.5), percentile(s, 0.9));
+        println!("{n:<12} {m:>9.2} {p:>9.2}");
+    }
+    println!(
+        "per epoch (median): {:.0} left keypoints, {:.0} stereo matches, {:.0} tie points, {:.0} window observations, {:.0} \
+         iterations; epochs with flags: {flagged}",
+        percentile(&mut kps, 0.5),
+        percentile(&mut stereo, 0.5),
+        percentile(&mut ties, 0.5),
+        percentile(&mut obs, 0.5),
+        percentile(&mut iters, 0.5),
+    );
+    if let Some(path) = poses_out {
+        phototraverse_host::poses::write_poses(&path, &poses).map_err(|e| e.to_string())?;
+    }
+    if let Some(gt) = &ds.ground_truth {
+        let e = evaluate(gt, &poses).map_err(|e| e.to_string())?;
+        print!("{}", e.summary());
+    }
+    Ok(())
+}

@@ -1,0 +1,91 @@
+//! End to end through the CLI: `run --mode seed2014 --estimate-rig` on a small
+//! synthetic seed-2014 street completes, says its mode, and reports the rig and the
+//! chi-square counts in report.json.
+use std::process::Command;
+
+fn ok(args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_phototraverse"))
+        .args(args)
+        .output()
+        .expect("binary runs");
+    assert!(
+        out.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+#[test]
+fn run_seed2014_mode_with_the_rig_estimated() {
+    let t = tempfile::tempdir().unwrap();
+    let d = t.path().join("seed2014");
+    let r = t.path().join("run");
+    let (d, r) = (d.to_str().unwrap(), r.to_str().unwrap());
+    ok(&["synth", "--scene", "seed2014", "--frames", "4", "--out", d]);
+    let stdout = ok(&[
+        "run",
+        d,
+        "--out",
+        r,
+        "--mode",
+        "seed2014",
+        "--estimate-rig",
+        "--link",
+        "inproc",
+        "--quiet",
+    ]);
+    assert!(stdout.contains("mode seed2014: 4 epochs"), "{stdout}");
+    assert!(stdout.contains("chi-square over"), "{stdout}");
+    assert!(stdout.contains("rig estimated"), "{stdout}");
+    let text = std::fs::read_to_string(t.path().join("run/report.json")).unwrap();
+    let json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(json["mode"], "seed2014");
+    assert_eq!(json["epochs"].as_array().unwrap().len(), 4);
+    let q = &json["quality"];
+    let adjusted = q["adjusted"].as_u64().unwrap();
+    assert!(adjusted >= 1, "{q}");
+    let counts = ["chi2_passed", "chi2_failed", "chi2_below"]
+        .map(|k| q[k].as_u64().unwrap())
+        .iter()
+        .sum::<u64>();
+    assert_eq!(counts, adjusted, "{q}");
+    // The estimated base stays near the calibrated 0.4 m rig (seed 000's bar).
+    let rig = &json["rig"];
+    let b: Vec<f64> = rig["base_m"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let cal: Vec<f64> = rig["calibration_base_m"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let len = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    assert!((len(&b) - len(&cal)).abs() < 0.01, "{rig}");
+    assert!(
+        rig["std"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|v| v.as_f64().unwrap() > 0.0),
+        "{rig}"
+    );
+}
+
+#[test]
+fn unknown_mode_is_refused_with_the_choices() {
+    let out = Command::new(env!("CARGO_BIN_EXE_phototraverse"))
+        .args(["run", "nowhere", "--mode", "seed1999"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("seed2014") && err.contains("seed2006"),
+        "{err}"
+    );
+}
