@@ -88,8 +88,11 @@ pub fn traverse_config(c: &Configure) -> Result<TraverseConfig, BuildError> {
     cfg.adjust.window = window;
     cfg.matching.track_history = window;
     cfg.matching.max_tracks = (p.track_capacity as usize).max(1);
-    // The mode's own settings (seed window lengths included) come last.
-    Ok(cfg.with_mode(t.mode))
+    // The mode's own settings (seed window lengths included) come last, then the
+    // capacities that follow from the window.
+    let mut cfg = cfg.with_mode(t.mode);
+    cfg.fit_capacities();
+    Ok(cfg)
 }
 
 fn build_error(e: TraverseError) -> BuildError {

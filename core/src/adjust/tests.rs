@@ -988,7 +988,8 @@ fn seed_weighting_schemes_and_seed_reweighting() {
     for &i in &flagged {
         assert_eq!(
             w.observations()[i].weight,
-            [super::weighting::SEED_REWEIGHT; 2]
+            // Stored in f32 (see `Observation`).
+            [super::weighting::SEED_REWEIGHT as f32; 2]
         );
     }
     // Most blunders have an x residual above one pixel.

@@ -25,7 +25,7 @@ use super::cholesky;
 use super::constraints::{base_length, distance, prior_residual, smoothness};
 use super::geometry::{project_rig, project_with, project_xy, Camera, RigParams, Rotations};
 use super::quality::ChiSquareTest;
-use super::weighting::{cauchy_factor, median, CHI2_2_MEDIAN, SEED_REWEIGHT};
+use super::weighting::{cauchy_factor, median_by_rank, CHI2_2_MEDIAN, SEED_REWEIGHT};
 use crate::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget, OutOfMemory};
 use crate::camera::{Pose, Rig};
 use bytemuck::{Pod, Zeroable};
@@ -180,16 +180,22 @@ impl core::fmt::Display for AdjustError {
     }
 }
 
-/// One image measurement of a tie point.
+/// One image measurement of a tie point, 36 bytes.
+///
+/// Stored in `f32`: photo-coordinates of a few millimetres keep about 5e-7 mm
+/// (1e-4 pixel at 5 um pixels), far below any measurement noise; weights and the robust
+/// factor need fewer digits still. Everything computed from them (residuals, normal
+/// equations) is `f64`: read them through [`Observation::xy_mm`] and
+/// [`Observation::weights`].
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct Observation {
     /// Corrected photo-coordinates `(xc, yc)`, mm.
-    pub xy: [f64; 2],
+    pub xy: [f32; 2],
     /// Weights `[p_x, p_y]`, `1/mm^2` for the sigma scheme.
-    pub weight: [f64; 2],
+    pub weight: [f32; 2],
     /// Robust factor set by the solver (1 = full weight, 0 = excluded).
-    pub factor: f64,
+    pub factor: f32,
     /// Point index (from [`Window::add_point`]).
     pub point: u32,
     /// Epoch id (from [`Window::add_epoch`]).
@@ -211,8 +217,8 @@ impl Observation {
 
     pub fn new(epoch: u32, camera: Camera, point: u32, xy: [f64; 2], weight: [f64; 2]) -> Self {
         Observation {
-            xy,
-            weight,
+            xy: [xy[0] as f32, xy[1] as f32],
+            weight: [weight[0] as f32, weight[1] as f32],
             factor: 1.0,
             point,
             epoch,
@@ -221,6 +227,18 @@ impl Observation {
             flags: 0,
             _pad: [0; 2],
         }
+    }
+
+    /// Photo-coordinates, mm, widened for the computation.
+    #[inline]
+    pub fn xy_mm(&self) -> [f64; 2] {
+        [self.xy[0] as f64, self.xy[1] as f64]
+    }
+
+    /// Weights `[p_x, p_y]` (without the robust factor), widened for the computation.
+    #[inline]
+    pub fn weights(&self) -> [f64; 2] {
+        [self.weight[0] as f64, self.weight[1] as f64]
     }
 
     pub fn is_flagged(&self) -> bool {
@@ -348,7 +366,6 @@ pub struct Window<'a> {
     scratch: &'a mut [BlockScratch],
     touched: &'a mut [u32],
     residuals: &'a mut [f64],
-    work: &'a mut [f64],
     dropped_points: usize,
     dropped_observations: usize,
     singular_epoch: Option<usize>,
@@ -404,11 +421,7 @@ impl AdjustConfig {
             ComponentKind::Working,
             bytes::<BlockScratch>(w1).saturating_add(bytes::<u32>(w1)),
         );
-        budget.add(
-            "adjust.residuals",
-            ComponentKind::Working,
-            bytes::<f64>(o).saturating_mul(2),
-        );
+        budget.add("adjust.residuals", ComponentKind::Working, bytes::<f64>(o));
     }
 
     fn validate(&self) -> Result<(), AdjustError> {
@@ -485,7 +498,6 @@ impl<'a> Window<'a> {
         let scratch = arena.alloc_slice::<BlockScratch>(w + 1)?;
         let touched = arena.alloc_slice::<u32>(w + 1)?;
         let residuals = arena.alloc_slice::<f64>(o)?;
-        let work = arena.alloc_slice::<f64>(o)?;
         let r = RigParams::from_rig(rig);
         Ok(Window {
             cfg,
@@ -515,7 +527,6 @@ impl<'a> Window<'a> {
             scratch,
             touched,
             residuals,
-            work,
             dropped_points: 0,
             dropped_observations: 0,
             singular_epoch: None,
@@ -831,7 +842,7 @@ impl<'a> Window<'a> {
             &self.points[o.point as usize].xyz,
         )
         .ok()?;
-        Some([o.xy[0] - pr.xy[0], o.xy[1] - pr.xy[1]])
+        Some([o.xy[0] as f64 - pr.xy[0], o.xy[1] as f64 - pr.xy[1]])
     }
 
     /// Items refused because a capacity was full: (points, observations).
@@ -1073,8 +1084,9 @@ impl<'a> Window<'a> {
             };
             self.obs[oi].flags &= !Observation::BEHIND;
             used += 1;
-            let r = [o.xy[0] - pr.xy[0], o.xy[1] - pr.xy[1]];
-            let wt = [o.weight[0] * o.factor, o.weight[1] * o.factor];
+            let r = [o.xy[0] as f64 - pr.xy[0], o.xy[1] as f64 - pr.xy[1]];
+            let f = o.factor as f64;
+            let wt = [o.weight[0] as f64 * f, o.weight[1] as f64 * f];
             for c in 0..2 {
                 cost += wt[c] * r[c] * r[c];
                 let jp = &pr.d_point[c];
@@ -1481,8 +1493,9 @@ impl<'a> Window<'a> {
                 &pt.xyz,
             ) {
                 Some(xy) => {
-                    let r = [o.xy[0] - xy[0], o.xy[1] - xy[1]];
-                    cost += o.factor * (o.weight[0] * r[0] * r[0] + o.weight[1] * r[1] * r[1]);
+                    let r = [o.xy[0] as f64 - xy[0], o.xy[1] as f64 - xy[1]];
+                    let w = o.weights();
+                    cost += o.factor as f64 * (w[0] * r[0] * r[0] + w[1] * r[1] * r[1]);
                     self.obs[i].flags &= !Observation::BEHIND;
                 }
                 None => {
@@ -1617,7 +1630,7 @@ impl<'a> Window<'a> {
                     if let Some(r) = self.residual(i) {
                         if r[0].abs() > threshold_mm {
                             let o = &mut self.obs[i];
-                            o.weight = [SEED_REWEIGHT, SEED_REWEIGHT];
+                            o.weight = [SEED_REWEIGHT as f32; 2];
                             o.flags |= Observation::FLAGGED;
                         }
                     }
@@ -1702,7 +1715,7 @@ impl<'a> Window<'a> {
     /// Standardised 2-D residual `sqrt(v^T P v)` of every observation into `residuals`.
     fn normalised_residuals(&mut self) {
         for i in 0..self.n_obs {
-            let w = self.obs[i].weight;
+            let w = self.obs[i].weights();
             self.residuals[i] = match self.residual(i) {
                 Some(r) => libm::sqrt(w[0] * r[0] * r[0] + w[1] * r[1] * r[1]),
                 None => f64::INFINITY,
@@ -1715,16 +1728,14 @@ impl<'a> Window<'a> {
         self.normalised_residuals();
         let n = self.n_obs;
         // Median of t^2 over chi2_2's median: the robust variance factor.
-        for i in 0..n {
-            self.work[i] = self.residuals[i] * self.residuals[i];
-        }
-        let scale2 = (median(&mut self.work[..n]) / CHI2_2_MEDIAN).max(1e-30);
+        let res = &*self.residuals;
+        let scale2 = (median_by_rank(n, |i| Some(res[i] * res[i])) / CHI2_2_MEDIAN).max(1e-30);
         let scale = libm::sqrt(scale2);
         let mut change: f64 = 0.0;
         for i in 0..n {
             let f = cauchy_factor(self.residuals[i] / scale, 2.385);
-            change = change.max((f - self.obs[i].factor).abs());
-            self.obs[i].factor = f;
+            change = change.max((f - self.obs[i].factor as f64).abs());
+            self.obs[i].factor = f as f32;
         }
         change
     }
@@ -1741,16 +1752,11 @@ impl<'a> Window<'a> {
 
     /// Median of the accepted observations' `T` (in `residuals`) over chi2_2's median:
     /// 1 when the weights match the noise, and right also with the seed's weights
-    /// whose scale is arbitrary.
-    fn median_scale(&mut self) -> f64 {
-        let mut m = 0;
-        for i in 0..self.n_obs {
-            if self.obs[i].factor > 0.0 && self.residuals[i].is_finite() {
-                self.work[m] = self.residuals[i];
-                m += 1;
-            }
-        }
-        (median(&mut self.work[..m]) / CHI2_2_MEDIAN).max(1e-30)
+    /// whose scale is arbitrary. Selected in place (no copy of the residuals).
+    fn median_scale(&self) -> f64 {
+        let (res, obs) = (&*self.residuals, &*self.obs);
+        let used = |i: usize| (obs[i].factor > 0.0 && res[i].is_finite()).then_some(res[i]);
+        (median_by_rank(self.n_obs, used) / CHI2_2_MEDIAN).max(1e-30)
     }
 
     /// Detection (Baarda's DIA order): after plain least squares, the data are
@@ -1859,7 +1865,7 @@ impl<'a> Window<'a> {
         let Ok(pr) = self.project(slot, cam, &xyz) else {
             return f64::INFINITY;
         };
-        let r = [o.xy[0] - pr.xy[0], o.xy[1] - pr.xy[1]];
+        let r = [o.xy[0] as f64 - pr.xy[0], o.xy[1] as f64 - pr.xy[1]];
         let j = nalgebra::Matrix2x3::new(
             pr.d_point[0][0],
             pr.d_point[0][1],
@@ -1870,9 +1876,10 @@ impl<'a> Window<'a> {
         );
         let jq = j * vinv * j.transpose();
         let sign = if o.factor > 0.0 || all { -1.0 } else { 1.0 };
-        let q = nalgebra::Matrix2::new(1.0 / o.weight[0], 0.0, 0.0, 1.0 / o.weight[1]) + jq * sign;
+        let ow = o.weights();
+        let q = nalgebra::Matrix2::new(1.0 / ow[0], 0.0, 0.0, 1.0 / ow[1]) + jq * sign;
         // Untestable when the observation carries (almost) no redundancy.
-        if !(q[(0, 0)] > 1e-3 / o.weight[0]) || !(q[(1, 1)] > 1e-3 / o.weight[1]) {
+        if !(q[(0, 0)] > 1e-3 / ow[0]) || !(q[(1, 1)] > 1e-3 / ow[1]) {
             return 0.0;
         }
         match q.try_inverse() {

@@ -137,12 +137,8 @@ pub struct Geometry {
     pub depth: [usize; MAX_LEVELS],
     /// First row of each level's Gaussian ring in the shared ring buffer.
     pub gring_row0: [usize; MAX_LEVELS],
-    /// First row of each level's horizontal-pass ring (levels >= 1).
-    pub hring_row0: [usize; MAX_LEVELS],
     /// Rows of all Gaussian rings.
     pub gring_rows: usize,
-    /// Rows of all horizontal rings.
-    pub hring_rows: usize,
     /// Rows a keypoint waits for its descriptor neighbourhood (and reaches back).
     pub margin: usize,
     /// Cells of the spreading grid.
@@ -236,9 +232,7 @@ impl SiftConfig {
             delay: [0; MAX_LEVELS],
             depth: [0; MAX_LEVELS],
             gring_row0: [0; MAX_LEVELS],
-            hring_row0: [0; MAX_LEVELS],
             gring_rows: 0,
-            hring_rows: 0,
             margin: 0,
             cells: self.grid_cols * self.grid_rows,
         };
@@ -262,32 +256,43 @@ impl SiftConfig {
         // Descriptor reach in octave pixels: half diagonal of the sampling window
         // ((bins + 1) / 2 bins of 3 sigma) plus refinement shift, gradient and rounding.
         // Largest octave-relative scale a kept keypoint can have (refined layer < levels + 0.5).
-        let max_sigma = self.level_sigma(s0, self.levels as f32 + 0.5);
-        let reach = 3.0 * max_sigma * (DESC_BINS as f32 + 1.0) * 0.5 * 1.4143;
-        let ori_reach = 4.5 * max_sigma;
-        g.margin = libm::ceilf(reach.max(ori_reach)) as usize + 3;
+        g.margin = self.reach_rows(s0, self.levels);
         let last = n - 1;
         let mut row = 0;
         for k in 0..n {
             let lag = g.delay[last] - g.delay[k];
-            g.depth[k] = if k >= 1 && k <= self.levels {
-                // Orientation and descriptor rows: back to r_proc - margin.
-                2 * g.margin + REFINE_ROWS + lag + 1
+            let depth = if k >= 1 && k <= self.levels {
+                // Orientation and descriptor rows: back to r_proc minus the reach of the
+                // largest keypoint this level describes (keypoints of refined layer in
+                // [k - 0.5, k + 0.5) sample level k), ahead to the newest row produced.
+                // Keypoints are described `margin` rows after detection whatever their level.
+                g.margin + self.reach_rows(s0, k) + REFINE_ROWS + lag + 1
             } else {
                 // Difference of Gaussians around the detection row only.
                 2 * REFINE_ROWS + lag + 1
             };
+            // Level k+1 is blurred vertically from this ring: it must also hold the
+            // kernel's rows around the row being produced.
+            let source = if k + 1 < n {
+                2 * g.radius[k + 1] + 1
+            } else {
+                0
+            };
+            g.depth[k] = depth.max(source);
             g.gring_row0[k] = row;
             row += g.depth[k];
         }
         g.gring_rows = row;
-        let mut hrow = 0;
-        for k in 1..n {
-            g.hring_row0[k] = hrow;
-            hrow += 2 * g.radius[k] + 1;
-        }
-        g.hring_rows = hrow;
         g
+    }
+
+    /// Rows the orientation and descriptor windows of a keypoint described on level `k`
+    /// reach from its row (refined layer below `k + 0.5`), plus refinement and rounding.
+    fn reach_rows(&self, s0: f32, k: usize) -> usize {
+        let max_sigma = self.level_sigma(s0, k as f32 + 0.5);
+        let reach = 3.0 * max_sigma * (DESC_BINS as f32 + 1.0) * 0.5 * 1.4143;
+        let ori_reach = 4.5 * max_sigma;
+        libm::ceilf(reach.max(ori_reach)) as usize + 3
     }
 
     /// Adds the extractor's components: working buffers (`Working`) and the keypoint
@@ -302,11 +307,6 @@ impl SiftConfig {
             slice_bytes::<i32>(kernel_len(&g)),
         );
         budget.add(
-            "sift.hrings",
-            ComponentKind::Working,
-            slice_bytes::<i16>(g.hring_rows * w),
-        );
-        budget.add(
             "sift.gauss_rings",
             ComponentKind::Working,
             slice_bytes::<i16>(g.gring_rows * w),
@@ -316,7 +316,7 @@ impl SiftConfig {
             ComponentKind::Working,
             slice_bytes::<i16>(dog_len(&g, w)),
         );
-        let (a, b) = base_lens(w, h);
+        let (a, b) = base_lens(w, h, self.octaves);
         budget.add(
             "sift.octave_bases",
             ComponentKind::Working,
@@ -379,7 +379,10 @@ pub(crate) fn dog_len(g: &Geometry, w: usize) -> usize {
 }
 
 /// Sizes of the two alternating octave bases: octave 1 (w/2 x h/2) and octave 2 (w/4 x h/4);
-/// octave 3 reuses the first, octave 4 the second, and so on.
-pub(crate) fn base_lens(w: usize, h: usize) -> (usize, usize) {
-    ((w / 2) * (h / 2), (w / 4) * (h / 4))
+/// octave 3 reuses the first, octave 4 the second, and so on. Only the octaves configured
+/// get one: a single octave needs no base, two octaves only the first.
+pub(crate) fn base_lens(w: usize, h: usize, octaves: usize) -> (usize, usize) {
+    let a = if octaves >= 2 { (w / 2) * (h / 2) } else { 0 };
+    let b = if octaves >= 3 { (w / 4) * (h / 4) } else { 0 };
+    (a, b)
 }

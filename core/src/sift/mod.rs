@@ -89,7 +89,6 @@ pub struct Sift<'a> {
     geo: Geometry,
     fine: Geometry,
     kernels: &'a mut [i32],
-    hrings: &'a mut [i16],
     grings: &'a mut [i16],
     dog: &'a mut [i16],
     base_a: &'a mut [i16],
@@ -131,17 +130,16 @@ impl<'a> Sift<'a> {
     pub fn new(cfg: SiftConfig, arena: &mut Arena<'a>) -> Result<Self, SiftError> {
         let geo = cfg.geometry()?;
         let fine = cfg.fine_geometry()?;
-        if fine.gring_rows > geo.gring_rows || fine.hring_rows > geo.hring_rows || fine.n != geo.n {
+        if fine.gring_rows > geo.gring_rows || fine.n != geo.n {
             return Err(SiftError::BadConfig(
                 "fine octave does not fit the regular rings",
             ));
         }
         let w = cfg.max_width;
         let kernels = arena.alloc_slice::<i32>(kernel_len(&geo))?;
-        let hrings = arena.alloc_slice::<i16>(geo.hring_rows * w)?;
         let grings = arena.alloc_slice::<i16>(geo.gring_rows * w)?;
         let dog = arena.alloc_slice::<i16>(dog_len(&geo, w))?;
-        let (a, b) = base_lens(w, cfg.max_height);
+        let (a, b) = base_lens(w, cfg.max_height, cfg.octaves);
         let base_a = arena.alloc_slice::<i16>(a)?;
         let base_b = arena.alloc_slice::<i16>(b)?;
         let pad = arena.alloc_slice::<i16>(w + 2 * MAX_RADIUS)?;
@@ -162,7 +160,6 @@ impl<'a> Sift<'a> {
             geo,
             fine,
             kernels,
-            hrings,
             grings,
             dog,
             base_a,
@@ -339,34 +336,26 @@ impl<'a> Sift<'a> {
                 }
             }
         } else {
+            // Vertical pass over the rows of level k-1 still in its ring (its depth covers
+            // the kernel: see `SiftConfig::geometry`) into `tmp`, then horizontal into the
+            // ring: no horizontal-pass rings.
             let rad = g.radius[k];
-            let ring = 2 * rad + 1;
-            let h0 = g.hring_row0[k];
+            let (row0, depth) = (g.gring_row0[k - 1], g.depth[k - 1]);
             let taps = &self.kernels[(kb + k) * KERNEL_STRIDE..(kb + k + 1) * KERNEL_STRIDE];
-            let hrings = &*self.hrings;
+            let grings = &*self.grings;
             let rows = |j: usize| {
-                let s = (h0 + clamp_row(r, j, rad, h) % ring) * stride;
-                &hrings[s..s + w]
+                let s = (row0 + clamp_row(r, j, rad, h) % depth) * stride;
+                &grings[s..s + w]
             };
-            blur_column(
-                rows,
-                taps,
-                rad,
-                self.acc,
-                &mut self.grings[gstart..gstart + w],
-            );
-        }
-        if k + 1 < g.n {
-            let rad = g.radius[k + 1];
-            let slot = (g.hring_row0[k + 1] + r % (2 * rad + 1)) * stride;
-            let taps = &self.kernels[(kb + k + 1) * KERNEL_STRIDE..(kb + k + 2) * KERNEL_STRIDE];
+            let tmp = &mut self.tmp[..w];
+            blur_column(rows, taps, rad, self.acc, tmp);
             blur_row(
-                &self.grings[gstart..gstart + w],
+                tmp,
                 taps,
                 rad,
                 self.pad,
                 self.acc,
-                &mut self.hrings[slot..slot + w],
+                &mut self.grings[gstart..gstart + w],
             );
         }
         if k == self.cfg.levels && oct.decimate && r.is_multiple_of(2) && r / 2 < h / 2 {

@@ -9,6 +9,14 @@ use crate::sift::SiftConfig;
 use super::patches::Patches;
 use super::{Refined, TrackPoint};
 
+/// Tie points per epoch at most (the spreading keeps the best spread ones).
+pub const MAX_TIE_POINTS: usize = 400;
+/// SIFT pending candidates per image column, over [`PENDING_SCALE`]: 2048 at 640 px.
+pub const PENDING_PER_COLUMN: usize = 16;
+pub const PENDING_SCALE: usize = 5;
+/// Fewest SIFT pending candidates, whatever the width.
+pub const MIN_PENDING: usize = 256;
+
 /// Everything the traverse needs before the first frame: the rig, the datum, the
 /// stages' configurations and capacities.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -67,14 +75,15 @@ impl TraverseConfig {
             rows_only: matches!(matching.stereo, StereoGeometry::Rectified { .. }),
             ..RefineConfig::default()
         });
-        matching.max_tie_points = 400;
+        matching.max_tie_points = MAX_TIE_POINTS;
         matching.max_tracks = 600;
         let window = 8;
         matching.track_history = window;
         let adjust = AdjustConfig {
             window,
-            max_points: 1500,
-            max_observations: 12_000,
+            // Set from the window and the tie points by `fit_capacities` below.
+            max_points: 1,
+            max_observations: 1,
             max_iterations: 20,
             max_robust_rounds: 4,
             estimate_rig: false,
@@ -89,7 +98,7 @@ impl TraverseConfig {
             keep_exclusions: true,
             ..AdjustConfig::default()
         };
-        TraverseConfig {
+        let mut cfg = TraverseConfig {
             rig,
             datum,
             sift,
@@ -104,7 +113,37 @@ impl TraverseConfig {
             max_depth_m: 1000.0,
             prediction_sigmas: [0.01, 0.01, 0.01, 0.3, 0.3, 0.3],
             temporal_refine: true,
-        }
+        };
+        cfg.fit_capacities();
+        cfg
+    }
+
+    /// Derives the capacities that follow from the configured image size, keypoints,
+    /// tracks and window, so a small configuration is really small. Call it again after
+    /// changing any of `sift.max_width`, `sift.max_keypoints`, `matching.max_tracks`,
+    /// `matching.max_keypoints` or `adjust.window`.
+    ///
+    /// - tie points per epoch: at most [`MAX_TIE_POINTS`], the tracks and the keypoints;
+    /// - window points: each epoch creates at most one point per tie point, and a point
+    ///   lives while one of its observations is in the window: `tie points x window`;
+    /// - window observations: an epoch holds two per tie point (left and right) plus two
+    ///   per point intersected from it at the next epoch: `4 x tie points x window`.
+    ///   With these bounds the window never drops an observation;
+    /// - SIFT candidates waiting for their descriptor rows: a band of rows as wide as the
+    ///   image, so proportional to the width ([`PENDING_PER_COLUMN`]).
+    pub fn fit_capacities(&mut self) {
+        let m = &mut self.matching;
+        m.max_tie_points = MAX_TIE_POINTS.min(m.max_tracks).min(m.max_keypoints).max(1);
+        let t = m.max_tie_points;
+        let w = self.adjust.window.max(1);
+        self.adjust.max_points = t.saturating_mul(w);
+        self.adjust.max_observations = t.saturating_mul(w).saturating_mul(4);
+        self.sift.pending_capacity = self
+            .sift
+            .max_width
+            .saturating_mul(PENDING_PER_COLUMN)
+            .div_ceil(PENDING_SCALE)
+            .max(MIN_PENDING);
     }
 
     /// Feature storage per image: the extractor's cap, bounded by what the matcher reads.

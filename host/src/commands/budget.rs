@@ -49,7 +49,11 @@ pub struct BudgetReport {
     working_excluding_frames: usize,
     total_bytes: usize,
     ram_bytes: Option<usize>,
+    /// Everything, frames included, fits `ram_bytes`.
     fits: Option<bool>,
+    /// The working memory without the frame buffers fits `ram_bytes` (frames held elsewhere,
+    /// e.g. in the camera interface's own memory).
+    fits_excluding_frames: Option<bool>,
 }
 
 fn parse_bytes(s: &str) -> Result<usize> {
@@ -107,6 +111,7 @@ pub fn report(args: &Args) -> Result<BudgetReport> {
         total_bytes: total,
         ram_bytes: ram,
         fits: ram.map(|r| total <= r),
+        fits_excluding_frames: ram.map(|r| total - frames <= r),
     })
 }
 
@@ -140,10 +145,16 @@ pub fn run(args: Args) -> Result<()> {
         r.total_bytes,
         r.total_bytes as f64 / 1024.0
     );
-    if let (Some(ram), Some(fits)) = (r.ram_bytes, r.fits) {
-        let verdict = if fits { "fits" } else { "does NOT fit" };
+    if let Some(ram) = r.ram_bytes {
+        let verdict = |fits: bool| if fits { "fits" } else { "does NOT fit" };
         println!(
-            "{verdict} in {ram} bytes of RAM ({:+} bytes spare)",
+            "excluding frames: {} in {ram} bytes of RAM ({:+} bytes spare)",
+            verdict(r.working_excluding_frames <= ram),
+            ram as i64 - r.working_excluding_frames as i64
+        );
+        println!(
+            "with the frames:  {} in {ram} bytes of RAM ({:+} bytes spare)",
+            verdict(r.total_bytes <= ram),
             ram as i64 - r.total_bytes as i64
         );
     }

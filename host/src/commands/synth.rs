@@ -46,6 +46,10 @@ pub struct Args {
     /// Rays per side on silhouette pixels (anti-aliasing).
     #[arg(long, default_value_t = 3)]
     pub edge_ss: u32,
+    /// Image size WxH (e.g. 320x240) instead of the scene's: the same sensor and field of
+    /// view sampled by fewer (or more) pixels.
+    #[arg(long, value_parser = parse_size)]
+    pub size: Option<(u32, u32)>,
     /// Typical sensor: `--realistic` = blur 0.6, vignetting 0.25, flicker 0.05, noise 1.5, JPEG 90, calib base=0.003,focal=0.003,pp_px=1,rel_deg=0.05.
     #[arg(long)]
     pub realistic: bool,
@@ -69,6 +73,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         noise: a.noise,
     };
     opts.jpeg_quality = a.jpeg;
+    opts.size = a.size;
     opts.calib_error =
         CalibError::parse(&a.calib_error).map_err(|e| anyhow::anyhow!("--calib-error: {e}"))?;
     if a.realistic {
@@ -115,4 +120,17 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// `WxH` -> (W, H).
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("{s:?}: expected WxH, e.g. 320x240"))?;
+    let p = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("{s:?}: {v:?} is not a pixel count"))
+    };
+    Ok((p(w)?, p(h)?))
 }

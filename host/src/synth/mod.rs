@@ -43,6 +43,9 @@ pub struct SynthOptions {
     pub jpeg_quality: Option<u8>,
     pub edge_ss: u32,
     pub progress: bool,
+    /// Image size `(width, height)` instead of the scene's: the same sensor and field of
+    /// view sampled by other pixels (see [`resample`]).
+    pub size: Option<(u32, u32)>,
 }
 
 impl SynthOptions {
@@ -59,6 +62,7 @@ impl SynthOptions {
             jpeg_quality: None,
             edge_ss: RenderSettings::default().edge_ss,
             progress: false,
+            size: None,
         }
     }
 }
@@ -102,9 +106,34 @@ fn mix(seed: u64, k: u64, cam: u64) -> u64 {
         ^ cam.wrapping_mul(0x94d0_49bb_1331_11eb)
 }
 
+/// `cam` with `w` x `h` pixels on the same sensor: the pixel size scales so the sensor
+/// (and so the field of view, the principal point and the distortion, all in mm) stays.
+pub fn resample(
+    cam: &phototraverse_core::camera::Interior,
+    w: u32,
+    h: u32,
+) -> anyhow::Result<phototraverse_core::camera::Interior> {
+    anyhow::ensure!(
+        (16..=8192).contains(&w) && (16..=8192).contains(&h),
+        "image size {w}x{h} out of 16..=8192"
+    );
+    let sx = cam.width_px as f64 / w as f64;
+    let sy = cam.height_px as f64 / h as f64;
+    Ok(phototraverse_core::camera::Interior {
+        width_px: w,
+        height_px: h,
+        pixel_size_mm: [cam.pixel_size_mm[0] * sx, cam.pixel_size_mm[1] * sy],
+        ..*cam
+    })
+}
+
 /// Renders and writes the dataset.
 pub fn generate(opts: &SynthOptions) -> anyhow::Result<SynthSummary> {
-    let plan = plan(&opts.scene, opts.frames, opts.seed).map_err(anyhow::Error::msg)?;
+    let mut plan = plan(&opts.scene, opts.frames, opts.seed).map_err(anyhow::Error::msg)?;
+    if let Some((w, h)) = opts.size {
+        plan.rig.left = resample(&plan.rig.left, w, h)?;
+        plan.rig.right = resample(&plan.rig.right, w, h)?;
+    }
     let layout = opts.layout.unwrap_or(plan.layout);
     let truth = plan.rig;
     let mut calib_rng = ChaCha8Rng::seed_from_u64(mix(opts.seed, u64::MAX, 7));
