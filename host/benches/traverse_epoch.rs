@@ -197,7 +197,10 @@ fn main() -> Result<(), String> {
         percentile(&mut iters, 0.5),
     );
     if !flag_list.is_empty() {
-        println!("flags (epoch:bits, see traverse::flags): {}", flag_list.join(" "));
+        println!(
+            "flags (epoch:bits, see traverse::flags): {}",
+            flag_list.join(" ")
+        );
     }
     if let Some(path) = poses_out {
         phototraverse_host::poses::write_poses(&path, &poses).map_err(|e| e.to_string())?;

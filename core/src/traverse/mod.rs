@@ -816,7 +816,11 @@ impl Traverse<'_> {
         } else {
             &self.cfg.rig.right
         };
-        let px = interior.corrected_to_pixel(o.xy[0], o.xy[1]).ok()?;
+        let px = {
+            let [x, y] = o.xy_mm();
+            interior.corrected_to_pixel(x, y)
+        }
+        .ok()?;
         let [sx, sy] = interior.pixel_size_mm;
         let residual = (!self.window.point_excluded(o.point))
             .then(|| self.window.residual(i))
