@@ -62,7 +62,7 @@ impl DatumSettings {
 /// keypoints_per_image = 1000   # features kept per image
 /// octaves = 4                  # scale-space octaves
 /// scales_per_octave = 3
-/// contrast_threshold = 0.04    # DoG contrast, grey levels / 255
+/// contrast_threshold = 0.02    # DoG contrast, grey levels / 255
 /// edge_ratio = 10.0            # principal curvature ratio
 /// match_ratio = 0.8            # Lowe's ratio
 /// max_disparity_px = 320.0     # rectified rigs: disparity search range
@@ -99,7 +99,7 @@ impl Default for PipelineSettings {
             keypoints_per_image: 1000,
             octaves: 4,
             scales_per_octave: 3,
-            contrast_threshold: 0.04,
+            contrast_threshold: 0.02,
             edge_ratio: 10.0,
             match_ratio: 0.8,
             max_disparity_px: None,

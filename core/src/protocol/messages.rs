@@ -331,7 +331,7 @@ impl Default for Pipeline {
             keypoints_per_image: 1000,
             window_len: 5,
             track_capacity: 2000,
-            contrast_threshold: 0.04,
+            contrast_threshold: 0.02,
             edge_ratio: 10.0,
             match_ratio: 0.8,
             max_disparity_px: 128.0,
