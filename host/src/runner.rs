@@ -335,14 +335,7 @@ impl<'d> Run<'d> {
             self.report.rig = Some(RigReport {
                 relative_angles_deg: [p[0], p[1], p[2]].map(f64::to_degrees),
                 base_m: self.rig.base_m,
-                std: [
-                    s[0].to_degrees(),
-                    s[1].to_degrees(),
-                    s[2].to_degrees(),
-                    s[3],
-                    s[4],
-                    s[5],
-                ],
+                std: crate::report::sigmas_in_degrees(s),
                 calibration_angles_deg: c.relative_angles.map(f64::to_degrees),
                 calibration_base_m: c.base_m,
             });

@@ -17,18 +17,22 @@ pub struct CameraEop {
     pub sigma: Option<[f64; 6]>,
 }
 
+/// Standard deviations (three angles in radians, three lengths in metres) with the
+/// angles in degrees, as the reports print them.
+pub fn sigmas_in_degrees(s: [f64; 6]) -> [f64; 6] {
+    [
+        s[0].to_degrees(),
+        s[1].to_degrees(),
+        s[2].to_degrees(),
+        s[3],
+        s[4],
+        s[5],
+    ]
+}
+
 impl CameraEop {
     pub fn from_pose(pose: &Pose, sigma_rad_m: Option<[f64; 6]>) -> Self {
-        let sigma = sigma_rad_m.map(|s| {
-            [
-                s[0].to_degrees(),
-                s[1].to_degrees(),
-                s[2].to_degrees(),
-                s[3],
-                s[4],
-                s[5],
-            ]
-        });
+        let sigma = sigma_rad_m.map(sigmas_in_degrees);
         CameraEop {
             omega_deg: pose.omega.to_degrees(),
             phi_deg: pose.phi.to_degrees(),
