@@ -76,6 +76,7 @@ pub fn traverse_config(c: &Configure) -> Result<TraverseConfig, BuildError> {
     cfg.sift.octaves = p.octaves.max(1) as usize;
     cfg.sift.levels = p.scales_per_octave.max(1) as usize;
     cfg.sift.contrast_threshold = p.contrast_threshold;
+    cfg.sift.fine_octave = p.fine_octave;
     cfg.sift.edge_threshold = p.edge_ratio;
     cfg.matching.ratio = p.match_ratio;
     if let StereoGeometry::Rectified {

@@ -63,6 +63,7 @@ impl DatumSettings {
 /// octaves = 4                  # scale-space octaves
 /// scales_per_octave = 3
 /// contrast_threshold = 0.02    # DoG contrast, grey levels / 255
+/// fine_octave = false          # half-pixel scales too: ~2x keypoints, ~2x SIFT time
 /// edge_ratio = 10.0            # principal curvature ratio
 /// match_ratio = 0.8            # Lowe's ratio
 /// max_disparity_px = 320.0     # rectified rigs: disparity search range
@@ -80,6 +81,8 @@ pub struct PipelineSettings {
     pub octaves: u8,
     pub scales_per_octave: u8,
     pub contrast_threshold: f32,
+    /// The extractor's fine octave (the scales OpenCV reaches by doubling the image).
+    pub fine_octave: bool,
     pub edge_ratio: f32,
     pub match_ratio: f32,
     /// `None`: half the image width.
@@ -100,6 +103,7 @@ impl Default for PipelineSettings {
             octaves: 4,
             scales_per_octave: 3,
             contrast_threshold: 0.02,
+            fine_octave: false,
             edge_ratio: 10.0,
             match_ratio: 0.8,
             max_disparity_px: None,
@@ -194,6 +198,7 @@ impl PipelineSettings {
                 edge_ratio: self.edge_ratio,
                 match_ratio: self.match_ratio,
                 max_disparity_px: self.max_disparity_px.unwrap_or(w as f32 * 0.5),
+                fine_octave: self.fine_octave,
             },
         }
     }
@@ -231,7 +236,7 @@ mod tests {
         let f = dir.path().join("seed.toml");
         std::fs::write(
             &f,
-            "mode = \"seed2006\"\nestimate_rig = true\nsigma_px = 0.8\n\
+            "mode = \"seed2006\"\nestimate_rig = true\nsigma_px = 0.8\nfine_octave = true\n\
              [datum]\nomega_deg = 92.0\nphi_deg = 1.0\nkappa_deg = -2.0\nposition_m = [5.0, 6.0, 1.2]\n",
         )
         .unwrap();
@@ -246,11 +251,13 @@ mod tests {
         assert_eq!(c.traverse.mode, TraverseMode::Seed2006);
         assert!(c.traverse.estimate_rig);
         assert_eq!(c.traverse.sigma_px, 0.8);
+        assert!(c.pipeline.fine_octave);
         let want = Pose::from_degrees(92.0, 1.0, -2.0, [5.0, 6.0, 1.2]).to_params();
         assert_eq!(c.traverse.datum, want);
         // Without [datum] the dataset's datum goes.
         let d = PipelineSettings::default().configure_for(&rig, &dataset);
         assert_eq!(d.traverse.datum, dataset.to_params());
         assert_eq!(d.traverse.mode, TraverseMode::Window);
+        assert!(!d.pipeline.fine_octave);
     }
 }

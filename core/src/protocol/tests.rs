@@ -279,7 +279,10 @@ fn configure_v2_round_trips_and_v1_payloads_get_the_v1_behaviour() {
     let v2 = Configure {
         version: 2,
         rig,
-        pipeline: Pipeline::default(),
+        pipeline: Pipeline {
+            fine_octave: true,
+            ..Pipeline::default()
+        },
         traverse: TraverseSettings {
             mode: TraverseMode::Seed2014,
             estimate_rig: true,
@@ -303,6 +306,15 @@ fn configure_v2_round_trips_and_v1_payloads_get_the_v1_behaviour() {
         let n = c.emit(&mut payload).unwrap();
         assert_eq!(Configure::parse(&payload[..n]).unwrap(), c);
     }
+    let only_octave = Configure {
+        traverse: TraverseSettings {
+            estimate_rig: false,
+            ..v2.traverse
+        },
+        ..v2
+    };
+    let n = only_octave.emit(&mut payload).unwrap();
+    assert_eq!(Configure::parse(&payload[..n]).unwrap(), only_octave);
     payload[243] = 9;
     assert_eq!(
         Configure::parse(&payload[..n]),
@@ -315,7 +327,15 @@ fn configure_v2_round_trips_and_v1_payloads_get_the_v1_behaviour() {
     assert_eq!(n1, 243);
     let back = Configure::parse(&payload[..n1]).unwrap();
     assert_eq!(back.rig, v2.rig);
-    assert_eq!(back.pipeline, v2.pipeline);
+    // The fine octave travels in the v2 flags: a v1 firmware extracts without it.
+    assert!(!back.pipeline.fine_octave);
+    assert_eq!(
+        back.pipeline,
+        Pipeline {
+            fine_octave: false,
+            ..v2.pipeline
+        }
+    );
     assert_eq!(back.traverse, TraverseSettings::default());
     assert_eq!(back.traverse.mode, TraverseMode::Window);
     assert!(!back.traverse.estimate_rig);
