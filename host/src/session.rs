@@ -518,17 +518,7 @@ impl<T: Transport> Session<T> {
             }
         }
         let seq = self.next_seq;
-        let wire = self
-            .bufs
-            .encode(
-                Header {
-                    message: msg.message_type(),
-                    seq,
-                },
-                |p| msg.emit(p),
-            )
-            .map_err(|_| SessionError::Encode(msg.message_type()))?
-            .to_vec();
+        let wire = self.encode(msg, seq)?;
         if self.window.is_empty() {
             self.last_progress = Instant::now();
         }
@@ -634,10 +624,9 @@ impl<T: Transport> Session<T> {
         Ok(())
     }
 
-    /// Unsequenced control message (ack, nack).
-    fn send_control(&mut self, msg: &Message) -> Result<(), SessionError> {
-        let seq = self.next_seq;
-        let wire = self
+    /// The framed bytes of `msg` with sequence number `seq`.
+    fn encode(&mut self, msg: &Message, seq: u16) -> Result<Vec<u8>, SessionError> {
+        Ok(self
             .bufs
             .encode(
                 Header {
@@ -647,7 +636,13 @@ impl<T: Transport> Session<T> {
                 |p| msg.emit(p),
             )
             .map_err(|_| SessionError::Encode(msg.message_type()))?
-            .to_vec();
+            .to_vec())
+    }
+
+    /// Unsequenced control message (ack, nack).
+    fn send_control(&mut self, msg: &Message) -> Result<(), SessionError> {
+        let seq = self.next_seq;
+        let wire = self.encode(msg, seq)?;
         self.write(&wire)?;
         self.flush()
     }

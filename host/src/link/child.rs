@@ -1,7 +1,7 @@
 //! The firmware as a child process: its stdin and stdout are the link.
-use super::transport::{Incoming, StreamTransport, Transport};
+use super::transport::{Incoming, StreamTransport};
 use anyhow::{bail, Context};
-use std::io::{self, BufRead, BufReader, BufWriter};
+use std::io::{BufRead, BufReader, BufWriter};
 use std::path::PathBuf;
 use std::process::{Child, ChildStdin, Command, Stdio};
 use std::time::Duration;
@@ -109,20 +109,7 @@ impl ChildLink {
     }
 }
 
-impl Transport for ChildLink {
-    fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
-        self.inner.send(bytes)
-    }
-    fn flush(&mut self) -> io::Result<()> {
-        self.inner.flush()
-    }
-    fn recv(&mut self, timeout: Duration) -> io::Result<Option<Vec<u8>>> {
-        self.inner.recv(timeout)
-    }
-    fn describe(&self) -> String {
-        self.inner.describe()
-    }
-}
+super::transport::delegate_to_inner_stream!(ChildLink);
 
 /// Spawns the firmware listening on TCP (an ephemeral 127.0.0.1 port) and
 /// returns the child and the address it printed.

@@ -1,6 +1,6 @@
 //! TCP and serial-port transports.
 use super::child::{spawn_tcp_firmware, ChildGuard};
-use super::transport::{Incoming, StreamTransport, Transport};
+use super::transport::{Incoming, StreamTransport};
 use anyhow::Context;
 use std::io::{self, BufWriter};
 use std::net::TcpStream;
@@ -40,20 +40,7 @@ impl TcpLink {
     }
 }
 
-impl Transport for TcpLink {
-    fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
-        self.inner.send(bytes)
-    }
-    fn flush(&mut self) -> io::Result<()> {
-        self.inner.flush()
-    }
-    fn recv(&mut self, timeout: Duration) -> io::Result<Option<Vec<u8>>> {
-        self.inner.recv(timeout)
-    }
-    fn describe(&self) -> String {
-        self.inner.describe()
-    }
-}
+super::transport::delegate_to_inner_stream!(TcpLink);
 
 /// A serial device (UART, USB CDC, pseudo-terminal) through the `serialport` crate.
 pub struct SerialLink {
@@ -79,20 +66,7 @@ impl SerialLink {
     }
 }
 
-impl Transport for SerialLink {
-    fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
-        self.inner.send(bytes)
-    }
-    fn flush(&mut self) -> io::Result<()> {
-        self.inner.flush()
-    }
-    fn recv(&mut self, timeout: Duration) -> io::Result<Option<Vec<u8>>> {
-        self.inner.recv(timeout)
-    }
-    fn describe(&self) -> String {
-        self.inner.describe()
-    }
-}
+super::transport::delegate_to_inner_stream!(SerialLink);
 
 /// A pseudo-terminal pair: the master end as a file and the slave's device path
 /// (a serial device for tests without hardware).

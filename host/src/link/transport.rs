@@ -108,6 +108,31 @@ impl Incoming {
     }
 }
 
+/// `impl Transport for $link` by delegating to its `inner` [`StreamTransport`]
+/// (the links differ only in how they open the stream and what they keep alive).
+macro_rules! delegate_to_inner_stream {
+    ($($link:ty),+ $(,)?) => {$(
+        impl $crate::link::transport::Transport for $link {
+            fn send(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+                $crate::link::transport::Transport::send(&mut self.inner, bytes)
+            }
+            fn flush(&mut self) -> std::io::Result<()> {
+                $crate::link::transport::Transport::flush(&mut self.inner)
+            }
+            fn recv(
+                &mut self,
+                timeout: std::time::Duration,
+            ) -> std::io::Result<Option<Vec<u8>>> {
+                $crate::link::transport::Transport::recv(&mut self.inner, timeout)
+            }
+            fn describe(&self) -> String {
+                $crate::link::transport::Transport::describe(&self.inner)
+            }
+        }
+    )+};
+}
+pub(crate) use delegate_to_inner_stream;
+
 /// A transport made of any writer and a reader thread.
 pub struct StreamTransport<W: Write + Send> {
     pub(crate) writer: W,
