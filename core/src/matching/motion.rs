@@ -96,21 +96,8 @@ fn triangulate_corrected(
     l: [f32; 2],
     r: [f32; 2],
 ) -> Option<Vector3<f64>> {
-    let dl = Vector3::new(l[0] as f64, l[1] as f64, -rig.left.focal_mm);
-    let dr = mrel.transpose() * Vector3::new(r[0] as f64, r[1] as f64, -rig.right.focal_mm);
-    let b = Vector3::from(rig.base_m);
-    let (a11, a12, a22) = (dl.dot(&dl), -dl.dot(&dr), dr.dot(&dr));
-    let (r1, r2) = (dl.dot(&b), -dr.dot(&b));
-    let det = a11 * a22 - a12 * a12;
-    if det.is_nan() || det.abs() <= 1e-12 * a11 * a22 {
-        return None;
-    }
-    let s = (r1 * a22 - a12 * r2) / det;
-    let u = (a11 * r2 - a12 * r1) / det;
-    if s.is_nan() || u.is_nan() || s <= 0.0 || u <= 0.0 {
-        return None;
-    }
-    Some((dl * s + b + dr * u) * 0.5)
+    let f64s = |p: [f32; 2]| [p[0] as f64, p[1] as f64];
+    super::predict::triangulate_corrected(rig, mrel, f64s(l), f64s(r))
 }
 
 /// Converts pixel observations to corrected photo-coordinates (mm), in place.

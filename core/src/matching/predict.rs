@@ -32,8 +32,19 @@ fn triangulate_with(
     left_px: [f64; 2],
     right_px: [f64; 2],
 ) -> Option<Vector3<f64>> {
-    let [xl, yl] = rig.left.pixel_to_corrected(left_px[0], left_px[1]);
-    let [xr, yr] = rig.right.pixel_to_corrected(right_px[0], right_px[1]);
+    let l = rig.left.pixel_to_corrected(left_px[0], left_px[1]);
+    let r = rig.right.pixel_to_corrected(right_px[0], right_px[1]);
+    triangulate_corrected(rig, mrel, l, r)
+}
+
+/// Midpoint triangulation from corrected photo-coordinates (mm) in the left camera
+/// frame; `mrel` is the rig's relative rotation.
+pub fn triangulate_corrected(
+    rig: &Rig,
+    mrel: &Matrix3<f64>,
+    [xl, yl]: [f64; 2],
+    [xr, yr]: [f64; 2],
+) -> Option<Vector3<f64>> {
     let dl = Vector3::new(xl, yl, -rig.left.focal_mm);
     let dr = mrel.transpose() * Vector3::new(xr, yr, -rig.right.focal_mm);
     let b = Vector3::from(rig.base_m);
