@@ -115,42 +115,65 @@ mod simd {
     use core::arch::x86_64::*;
 
     /// Columns `0..w - w % 8` of [`super::convolve`]; returns how many were written.
+    ///
+    /// The symmetric rows are added first (`l + h` fits i16: samples are at most
+    /// 255 * 64), then two taps go into each `madd`: (s_0, s_1), (s_2, s_3), ... with the
+    /// centre row as s_0 and a zero row after an odd last tap. The sums are the scalar
+    /// path's exactly.
     pub fn convolve_sse2(rows: &[&[i16]], taps: &[i32], radius: usize, out: &mut [i16]) -> usize {
         let w = out.len();
         let blocks = w / 8;
+        let radius = radius.min(MAX_RADIUS);
         // SAFETY: every row holds at least `w` values (checked by the caller) and each
         // load/store below touches columns `c..c + 8` with `c + 8 <= blocks * 8 <= w`.
         // SSE2 is part of the x86_64 baseline.
         unsafe {
             let round = _mm_set1_epi32(1 << (KERNEL_BITS - 1));
             let centre = rows[radius].as_ptr();
-            // (k0, 0) pairs: the centre row is interleaved with zeros.
-            let k0 = _mm_set1_epi32(taps[0] & 0xffff);
-            // Hoisted per-tap constants and row pointers: (kj, kj) pairs, left and right rows.
-            let mut kv = [_mm_setzero_si128(); MAX_RADIUS + 1];
+            let tap = |j: usize| if j <= radius { taps[j] & 0xffff } else { 0 };
+            // Hoisted per-pair constants: (k_2m, k_2m+1) pairs.
+            let mut kv = [_mm_setzero_si128(); MAX_RADIUS / 2 + 1];
+            let pairs = radius / 2 + 1;
+            for (m, k) in kv.iter_mut().enumerate().take(pairs) {
+                *k = _mm_set1_epi32(tap(2 * m) | (tap(2 * m + 1) << 16));
+            }
+            // Row pointers of tap j = 1..=radius (left and right of the centre).
             let mut lp = [centre; MAX_RADIUS + 1];
             let mut hp = [centre; MAX_RADIUS + 1];
-            for j in 1..=radius.min(MAX_RADIUS) {
-                let kj = taps[j] & 0xffff;
-                kv[j] = _mm_set1_epi32(kj | (kj << 16));
+            for j in 1..=radius {
                 lp[j] = rows[radius - j].as_ptr();
                 hp[j] = rows[radius + j].as_ptr();
             }
             let zero = _mm_setzero_si128();
+            let sym = |j: usize, c: usize| {
+                let l = _mm_loadu_si128(lp[j].add(c) as *const __m128i);
+                let h = _mm_loadu_si128(hp[j].add(c) as *const __m128i);
+                _mm_add_epi16(l, h)
+            };
+            // Pair 0 is (centre, s_1); full pairs (s_2m, s_2m+1) follow; an even radius
+            // leaves s_radius alone with a zero.
+            let full = radius.div_ceil(2);
+            let odd_tail = radius >= 2 && radius.is_multiple_of(2);
             for b in 0..blocks {
                 let c = b * 8;
                 let x = _mm_loadu_si128(centre.add(c) as *const __m128i);
-                let mut a0 = _mm_madd_epi16(_mm_unpacklo_epi16(x, zero), k0);
-                let mut a1 = _mm_madd_epi16(_mm_unpackhi_epi16(x, zero), k0);
-                for j in 1..=radius.min(MAX_RADIUS) {
-                    let k = kv[j];
-                    let l = _mm_loadu_si128(lp[j].add(c) as *const __m128i);
-                    let h = _mm_loadu_si128(hp[j].add(c) as *const __m128i);
-                    a0 = _mm_add_epi32(a0, _mm_madd_epi16(_mm_unpacklo_epi16(l, h), k));
-                    a1 = _mm_add_epi32(a1, _mm_madd_epi16(_mm_unpackhi_epi16(l, h), k));
+                let s1 = if radius >= 1 { sym(1, c) } else { zero };
+                let mut a0 = _mm_add_epi32(round, _mm_madd_epi16(_mm_unpacklo_epi16(x, s1), kv[0]));
+                let mut a1 = _mm_add_epi32(round, _mm_madd_epi16(_mm_unpackhi_epi16(x, s1), kv[0]));
+                for (m, &k) in kv.iter().enumerate().take(full).skip(1) {
+                    let s0 = sym(2 * m, c);
+                    let s1 = sym(2 * m + 1, c);
+                    a0 = _mm_add_epi32(a0, _mm_madd_epi16(_mm_unpacklo_epi16(s0, s1), k));
+                    a1 = _mm_add_epi32(a1, _mm_madd_epi16(_mm_unpackhi_epi16(s0, s1), k));
                 }
-                a0 = _mm_srai_epi32(_mm_add_epi32(a0, round), KERNEL_BITS as i32);
-                a1 = _mm_srai_epi32(_mm_add_epi32(a1, round), KERNEL_BITS as i32);
+                if odd_tail {
+                    let s0 = sym(radius, c);
+                    let k = kv[radius / 2];
+                    a0 = _mm_add_epi32(a0, _mm_madd_epi16(_mm_unpacklo_epi16(s0, zero), k));
+                    a1 = _mm_add_epi32(a1, _mm_madd_epi16(_mm_unpackhi_epi16(s0, zero), k));
+                }
+                a0 = _mm_srai_epi32(a0, KERNEL_BITS as i32);
+                a1 = _mm_srai_epi32(a1, KERNEL_BITS as i32);
                 _mm_storeu_si128(
                     out.as_mut_ptr().add(c) as *mut __m128i,
                     _mm_packs_epi32(a0, a1),
@@ -231,6 +254,45 @@ mod tests {
             let mut out = [0i16; 17];
             blur_row(&input, &taps, r, &mut pad, &mut acc, &mut out);
             assert_eq!(out, input);
+        }
+    }
+
+    /// The vectorised path (x86_64) gives the integer sums of the scalar definition exactly,
+    /// for every radius, odd and even widths and samples up to the largest level value.
+    #[test]
+    fn convolve_is_exact_for_every_radius() {
+        let mut taps = [0i32; KERNEL_STRIDE];
+        let mut seed = 12345u32;
+        for radius in 0..=MAX_RADIUS {
+            make_kernel(0.3 + radius as f32 / 3.0, radius, &mut taps);
+            for &w in &[1usize, 7, 8, 29, 64] {
+                let data: [[i16; 64]; 2 * MAX_RADIUS + 1] = core::array::from_fn(|_| {
+                    core::array::from_fn(|_| {
+                        seed = seed.wrapping_mul(1_103_515_245).wrapping_add(12345);
+                        if seed >> 31 == 1 {
+                            255 * 64
+                        } else {
+                            ((seed >> 16) % (255 * 64 + 1)) as i16
+                        }
+                    })
+                });
+                let rows: [&[i16]; 2 * MAX_RADIUS + 1] = core::array::from_fn(|j| &data[j][..]);
+                let rows = &rows[..2 * radius + 1];
+                let mut acc = [0i32; 64];
+                let mut out = [0i16; 64];
+                convolve(rows, &taps, radius, &mut acc, &mut out[..w]);
+                for c in 0..w {
+                    let mut sum = taps[0] * rows[radius][c] as i32;
+                    for j in 1..=radius {
+                        sum += taps[j] * (rows[radius - j][c] as i32 + rows[radius + j][c] as i32);
+                    }
+                    assert_eq!(
+                        out[c],
+                        round_q14(sum),
+                        "radius {radius} width {w} column {c}"
+                    );
+                }
+            }
         }
     }
 
