@@ -10,7 +10,8 @@
 use core::f32::consts::PI;
 
 use super::config::{DESC_BINS, DESC_GRID, DESC_ORI_BINS, DESC_SAMPLES_PER_BIN};
-use super::fastmath::{atan2_pos, floor_i, round_i};
+use super::desc_samples::{Frame, RowSamples, NO, P, PADDED};
+use super::fastmath::{floor_i, round_i};
 use super::levels::Levels;
 use crate::features::Descriptor;
 
@@ -87,10 +88,8 @@ pub fn describe(
     }
     // Padded histogram: (D + 2) x (D + 2) positions x (N + 1) orientations, folded at the end.
     let mut padded = [0f32; PADDED];
-    // One grid row at a time in three passes: gather the gradients (scalar, row lookups),
-    // magnitudes and angles (straight-line f32 over the row: vectorises), then the
-    // trilinear scatter. The arithmetic is the per-sample arithmetic, so the bytes do not
-    // depend on how it is scheduled.
+    // One grid row at a time: placement, gradients, magnitudes and bins, scatter
+    // (`desc_samples`).
     let frame = Frame {
         x,
         y,
@@ -98,24 +97,17 @@ pub fn describe(
         sin_t,
         inv_hw,
         half,
-        w,
-        h,
+        w: w as i32,
+        h: h as i32,
     };
     let mut row = RowSamples::default();
     for i in 0..DESC_GRID {
         // The grid is square: row i has v = u_i, so v sin = usin[i] and v cos = ucos[i].
-        let (vsin, vcos) = (usin[i], ucos[i]);
-        for j in 0..DESC_GRID {
-            let wgt = weights.get(i * DESC_GRID + j).copied().unwrap_or(0.0);
-            frame.gather(
-                x + ucos[j] - vsin,
-                y + usin[j] + vcos,
-                wgt,
-                &row_at,
-                &mut row,
-                j,
-            );
-        }
+        row.place(&frame, &ucos, &usin, usin[i], ucos[i]);
+        let wrow = weights
+            .get(i * DESC_GRID..(i + 1) * DESC_GRID)
+            .unwrap_or(&[]);
+        row.gradients(&row_at, wrow);
         row.magnitudes_and_bins(theta, obin_scale);
         row.scatter(&mut padded);
     }
@@ -129,133 +121,6 @@ pub fn describe(
         }
     }
     finish(&hist, out);
-}
-
-/// Padded histogram cells: positions -1..=D on both axes, orientations with a wrap slot.
-const P: usize = DESC_BINS + 2;
-const NO: usize = DESC_ORI_BINS + 1;
-const PADDED: usize = P * P * NO;
-
-/// The keypoint frame a descriptor samples in.
-struct Frame {
-    x: f32,
-    y: f32,
-    cos_t: f32,
-    sin_t: f32,
-    inv_hw: f32,
-    half: f32,
-    w: isize,
-    h: isize,
-}
-
-/// One grid row of samples; a sample outside the image or the bins keeps weight 0.
-struct RowSamples {
-    dx: [f32; DESC_GRID],
-    dy: [f32; DESC_GRID],
-    wgt: [f32; DESC_GRID],
-    rbin: [f32; DESC_GRID],
-    cbin: [f32; DESC_GRID],
-    mag: [f32; DESC_GRID],
-    obin: [f32; DESC_GRID],
-}
-
-impl Default for RowSamples {
-    fn default() -> Self {
-        RowSamples {
-            dx: [0.0; DESC_GRID],
-            dy: [0.0; DESC_GRID],
-            wgt: [0.0; DESC_GRID],
-            rbin: [0.0; DESC_GRID],
-            cbin: [0.0; DESC_GRID],
-            mag: [0.0; DESC_GRID],
-            obin: [0.0; DESC_GRID],
-        }
-    }
-}
-
-impl Frame {
-    /// Gradient and bins of the pixel nearest to (`sx`, `sy`) into sample `j` of `s`.
-    fn gather<'r>(
-        &self,
-        sx: f32,
-        sy: f32,
-        wgt: f32,
-        row_at: &impl Fn(isize) -> &'r [i16],
-        s: &mut RowSamples,
-        j: usize,
-    ) {
-        s.wgt[j] = 0.0;
-        s.dx[j] = 0.0;
-        s.dy[j] = 0.0;
-        let pc = round_i(sx) as isize;
-        let pr = round_i(sy) as isize;
-        if pc < 1 || pc >= self.w - 1 || pr < 1 || pr >= self.h - 1 {
-            return;
-        }
-        let (up, row, down) = (row_at(pr - 1), row_at(pr), row_at(pr + 1));
-        let c = pc as usize;
-        if c + 1 >= row.len() || c >= up.len() || c >= down.len() {
-            return;
-        }
-        // Bins from the exact position of the pixel sampled (not the ideal grid point), so
-        // rounding to the pixel grid does not blur the spatial binning under rotation.
-        let (ox, oy) = (pc as f32 - self.x, pr as f32 - self.y);
-        let cbin = (ox * self.cos_t + oy * self.sin_t) * self.inv_hw + self.half;
-        let rbin = (oy * self.cos_t - ox * self.sin_t) * self.inv_hw + self.half;
-        let d = DESC_BINS as f32;
-        if cbin <= -1.0 || cbin >= d || rbin <= -1.0 || rbin >= d {
-            return;
-        }
-        s.dx[j] = (row[c + 1] as i32 - row[c - 1] as i32) as f32;
-        s.dy[j] = (down[c] as i32 - up[c] as i32) as f32;
-        s.wgt[j] = wgt;
-        s.rbin[j] = rbin;
-        s.cbin[j] = cbin;
-    }
-}
-
-impl RowSamples {
-    /// Weighted magnitudes and orientation bins relative to `theta`, over the whole row.
-    fn magnitudes_and_bins(&mut self, theta: f32, obin_scale: f32) {
-        for j in 0..DESC_GRID {
-            let (dx, dy) = (self.dx[j], self.dy[j]);
-            self.mag[j] = libm::sqrtf(dx * dx + dy * dy) * self.wgt[j];
-            let ori = atan2_pos(dy, dx) - theta;
-            let ori = if ori < 0.0 { ori + 2.0 * PI } else { ori };
-            self.obin[j] = ori * obin_scale;
-        }
-    }
-
-    /// Trilinear distribution of the row's samples over the padded histogram.
-    fn scatter(&self, padded: &mut [f32; PADDED]) {
-        const N: usize = DESC_ORI_BINS;
-        for j in 0..DESC_GRID {
-            let mag = self.mag[j];
-            if mag == 0.0 {
-                continue;
-            }
-            let obin = self.obin[j];
-            let o0 = floor_i(obin).clamp(0, N as i32 - 1) as usize;
-            let fo = obin - o0 as f32;
-            let (rbin, cbin) = (self.rbin[j], self.cbin[j]);
-            let (rf, cf) = (floor_i(rbin), floor_i(cbin));
-            let (fr, fc) = (rbin - rf as f32, cbin - cf as f32);
-            // Padded indices: bin -1 is index 0.
-            let (r0, c0) = ((rf + 1).max(0) as usize, (cf + 1).max(0) as usize);
-            let m_r = [mag * (1.0 - fr), mag * fr];
-            let w_c = [1.0 - fc, fc];
-            for (dr, &mr) in m_r.iter().enumerate() {
-                for (dc, &wc) in w_c.iter().enumerate() {
-                    let m = mr * wc;
-                    let base = ((r0 + dr) * P + c0 + dc) * NO + o0;
-                    if let Some(cell) = padded.get_mut(base..base + 2) {
-                        cell[0] += m * (1.0 - fo);
-                        cell[1] += m * fo;
-                    }
-                }
-            }
-        }
-    }
 }
 
 /// Normalise, clip at 0.2, renormalise and quantise (512 scale, saturating, as OpenCV).

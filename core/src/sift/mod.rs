@@ -33,6 +33,7 @@
 //! ```
 
 pub mod config;
+pub mod desc_samples;
 pub mod descriptor;
 pub mod extrema;
 pub mod fastmath;
