@@ -40,6 +40,7 @@ pub fn orientations(
     // Large windows are sampled every other pixel: the level is blurred by sigma, so a
     // 2-pixel step above sigma 3 loses little and quarters the cost.
     let step = if sigma >= 3.0 { 2 } else { 1 };
+    let mut samples = WindowRow::default();
     for i in (-r..=r).step_by(step) {
         let yy = py + i;
         if yy <= 0 || yy >= h - 1 {
@@ -55,17 +56,24 @@ pub fn orientations(
             c0 += step as isize;
         }
         let c1 = (px + r).min(w - 2);
+        let mut n = 0;
         for xx in (c0..=c1).step_by(step) {
             let c = xx as usize;
-            let dx = (row[c + 1] as i32 - row[c - 1] as i32) as f32;
-            let dy = (down[c] as i32 - up[c] as i32) as f32;
-            let wgt = gi * g[(xx - px).unsigned_abs()];
-            let mag = libm::sqrtf(dx * dx + dy * dy);
-            let mut bin = round_i(atan2_pos(dy, dx) * scale).max(0) as usize;
-            if bin >= ORI_BINS {
-                bin -= ORI_BINS;
+            if c + 1 >= row.len() || c >= up.len() || c >= down.len() || n >= WINDOW {
+                break;
             }
-            hist[bin] += wgt * mag;
+            samples.dx[n] = (row[c + 1] as i32 - row[c - 1] as i32) as f32;
+            samples.dy[n] = (down[c] as i32 - up[c] as i32) as f32;
+            samples.wgt[n] = gi * g[(xx - px).unsigned_abs()];
+            n += 1;
+        }
+        samples.bins(n, scale);
+        for j in 0..n {
+            let bin = samples.bin[j].max(0) as usize;
+            let bin = if bin >= ORI_BINS { bin - ORI_BINS } else { bin };
+            if let Some(b) = hist.get_mut(bin) {
+                *b += samples.vote[j];
+            }
         }
     }
     // Circular [1 4 6 4 1] / 16 smoothing.
@@ -109,4 +117,107 @@ pub fn orientations(
         }
     }
     n
+}
+
+/// Samples of one window row at most.
+const WINDOW: usize = 2 * MAX_RADIUS + 2;
+
+/// Gradients of one window row and their votes: weighted magnitude and histogram bin.
+#[derive(Clone, Copy)]
+struct WindowRow {
+    dx: [f32; WINDOW],
+    dy: [f32; WINDOW],
+    wgt: [f32; WINDOW],
+    vote: [f32; WINDOW],
+    bin: [i32; WINDOW],
+}
+
+impl Default for WindowRow {
+    fn default() -> Self {
+        WindowRow {
+            dx: [0.0; WINDOW],
+            dy: [0.0; WINDOW],
+            wgt: [0.0; WINDOW],
+            vote: [0.0; WINDOW],
+            bin: [0; WINDOW],
+        }
+    }
+}
+
+impl WindowRow {
+    /// Votes of the first `n` samples (the bin before wrapping at `ORI_BINS`).
+    fn bins(&mut self, n: usize, scale: f32) {
+        #[cfg(target_arch = "x86_64")]
+        let done = self.bins_sse(n, scale);
+        #[cfg(not(target_arch = "x86_64"))]
+        let done = 0;
+        self.bins_scalar(done, n, scale);
+    }
+
+    /// The scalar definition of [`WindowRow::bins`], for samples `from..n`.
+    fn bins_scalar(&mut self, from: usize, n: usize, scale: f32) {
+        for j in from..n.min(WINDOW) {
+            let (dx, dy) = (self.dx[j], self.dy[j]);
+            self.vote[j] = self.wgt[j] * libm::sqrtf(dx * dx + dy * dy);
+            self.bin[j] = round_i(atan2_pos(dy, dx) * scale);
+        }
+    }
+
+    /// Samples `0..n` rounded up to whole lanes (the arrays have room); returns `n`.
+    #[cfg(target_arch = "x86_64")]
+    fn bins_sse(&mut self, n: usize, scale: f32) -> usize {
+        use super::fastmath::sse::{atan2_pos, floor_epi32};
+        use core::arch::x86_64::*;
+        const _: () = assert!(WINDOW.is_multiple_of(4));
+        let n = n.min(WINDOW);
+        // SAFETY: SSE2 is part of the x86_64 baseline; lanes j..j + 4 < WINDOW.
+        unsafe {
+            let s = _mm_set1_ps(scale);
+            let half = _mm_set1_ps(0.5);
+            for j in (0..n).step_by(4) {
+                let dx = _mm_loadu_ps(self.dx.as_ptr().add(j));
+                let dy = _mm_loadu_ps(self.dy.as_ptr().add(j));
+                let w = _mm_loadu_ps(self.wgt.as_ptr().add(j));
+                let m = _mm_sqrt_ps(_mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy)));
+                _mm_storeu_ps(self.vote.as_mut_ptr().add(j), _mm_mul_ps(w, m));
+                let b = floor_epi32(_mm_add_ps(_mm_mul_ps(atan2_pos(dy, dx), s), half));
+                _mm_storeu_si128(self.bin.as_mut_ptr().add(j) as *mut __m128i, b);
+            }
+        }
+        n
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The SSE2 votes are the scalar definition's bits.
+    #[test]
+    fn vector_votes_equal_the_scalar_definition() {
+        let mut seed = 99u32;
+        let mut next = || {
+            seed = seed.wrapping_mul(1_103_515_245).wrapping_add(12345);
+            (seed >> 8) as f32 / (1u32 << 24) as f32
+        };
+        for n in [0usize, 1, 5, 17, WINDOW] {
+            let mut a = WindowRow::default();
+            for j in 0..n {
+                a.dx[j] = libm::roundf((next() - 0.5) * 4000.0);
+                a.dy[j] = if j % 7 == 0 {
+                    0.0
+                } else {
+                    libm::roundf((next() - 0.5) * 4000.0)
+                };
+                a.wgt[j] = next();
+            }
+            let mut b = a;
+            a.bins(n, ORI_BINS as f32 / (2.0 * PI));
+            b.bins_scalar(0, n, ORI_BINS as f32 / (2.0 * PI));
+            for j in 0..n {
+                assert_eq!(a.vote[j].to_bits(), b.vote[j].to_bits(), "n {n} sample {j}");
+                assert_eq!(a.bin[j], b.bin[j], "n {n} sample {j}");
+            }
+        }
+    }
 }
