@@ -33,12 +33,13 @@ pub fn atan2_pos(y: f32, x: f32) -> f32 {
 /// the same order: lane by lane, the bits of the scalar forms.
 #[cfg(target_arch = "x86_64")]
 pub mod sse {
+    //! SAFETY (every function): register-only SSE2 operations, part of the x86_64 baseline.
     use core::arch::x86_64::*;
     use core::f32::consts::PI;
 
     /// floor(x) for x in the i32 range, as [`super::floor_i`].
     #[inline(always)]
-    pub unsafe fn floor_epi32(x: __m128) -> __m128i {
+    pub fn floor_epi32(x: __m128) -> __m128i {
         unsafe {
             let i = _mm_cvttps_epi32(x);
             let back = _mm_cvtepi32_ps(i);
@@ -49,7 +50,7 @@ pub mod sse {
 
     /// Lanes of `x` clamped into `lo..=hi`.
     #[inline(always)]
-    pub unsafe fn clamp_epi32(x: __m128i, lo: i32, hi: i32) -> __m128i {
+    pub fn clamp_epi32(x: __m128i, lo: i32, hi: i32) -> __m128i {
         unsafe {
             let (l, h) = (_mm_set1_epi32(lo), _mm_set1_epi32(hi));
             let below = _mm_cmplt_epi32(x, l);
@@ -60,13 +61,13 @@ pub mod sse {
     }
 
     #[inline(always)]
-    pub unsafe fn select(mask: __m128, a: __m128, b: __m128) -> __m128 {
+    pub fn select(mask: __m128, a: __m128, b: __m128) -> __m128 {
         unsafe { _mm_or_ps(_mm_and_ps(mask, a), _mm_andnot_ps(mask, b)) }
     }
 
     /// [`super::atan2_pos`] four lanes at a time.
     #[inline(always)]
-    pub unsafe fn atan2_pos(y: __m128, x: __m128) -> __m128 {
+    pub fn atan2_pos(y: __m128, x: __m128) -> __m128 {
         unsafe {
             const P1: f32 = 0.999_787_87;
             const P3: f32 = -0.325_808_4;
