@@ -33,7 +33,7 @@ pub fn atan2_pos(y: f32, x: f32) -> f32 {
 /// the same order: lane by lane, the bits of the scalar forms.
 #[cfg(target_arch = "x86_64")]
 pub mod sse {
-    //! SAFETY (every function): register-only SSE2 operations, part of the x86_64 baseline.
+    // SAFETY (every function): register-only SSE2 operations, part of the x86_64 baseline.
     use core::arch::x86_64::*;
     use core::f32::consts::PI;
 
