@@ -99,9 +99,11 @@ impl RowSamples {
         }
     }
 
-    /// Gradients of the placed samples from the window's rows (`row_at(r)` is image row
-    /// `r`, empty outside the window), and their Gaussian weights.
-    pub fn gradients<'r>(&mut self, row_at: &impl Fn(isize) -> &'r [i16], weights: &[f32]) {
+    /// Gradients of the placed samples from the window's rows (`rows[i]` is image row
+    /// `r_lo + i`), and their Gaussian weights. A sample whose neighbours fall outside the
+    /// window keeps weight 0.
+    pub fn gradients(&mut self, rows: &[&[i16]], r_lo: isize, weights: &[f32]) {
+        let weights = weights.get(..DESC_GRID).unwrap_or(&[0.0; DESC_GRID]);
         for j in 0..DESC_GRID {
             self.dx[j] = 0.0;
             self.dy[j] = 0.0;
@@ -109,15 +111,20 @@ impl RowSamples {
             if self.ok[j] == 0 {
                 continue;
             }
-            let pr = self.pr[j] as isize;
-            let (up, row, down) = (row_at(pr - 1), row_at(pr), row_at(pr + 1));
+            let i = self.pr[j] as isize - 1 - r_lo;
+            let Some([up, row, down]) = (i >= 0)
+                .then(|| rows.get(i as usize..i as usize + 3))
+                .flatten()
+            else {
+                continue;
+            };
             let c = self.pc[j] as usize;
             if c + 1 >= row.len() || c >= up.len() || c >= down.len() {
                 continue;
             }
             self.dx[j] = (row[c + 1] as i32 - row[c - 1] as i32) as f32;
             self.dy[j] = (down[c] as i32 - up[c] as i32) as f32;
-            self.wgt[j] = weights.get(j).copied().unwrap_or(0.0);
+            self.wgt[j] = weights[j];
         }
     }
 

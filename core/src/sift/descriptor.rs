@@ -68,14 +68,6 @@ pub fn describe(
     for (i, row) in rows.iter_mut().enumerate().take(n_rows) {
         *row = lv.row(k, r_lo + i as isize);
     }
-    let row_at = |r: isize| -> &[i16] {
-        let i = r - r_lo;
-        if i < 0 || i as usize >= n_rows {
-            &[]
-        } else {
-            rows[i as usize]
-        }
-    };
     let inv_hw = 1.0 / hw;
     let half = D as f32 * 0.5 - 0.5;
     let mut ucos = [0f32; DESC_GRID];
@@ -107,7 +99,7 @@ pub fn describe(
         let wrow = weights
             .get(i * DESC_GRID..(i + 1) * DESC_GRID)
             .unwrap_or(&[]);
-        row.gradients(&row_at, wrow);
+        row.gradients(&rows[..n_rows], r_lo, wrow);
         row.magnitudes_and_bins(theta, obin_scale);
         row.scatter(&mut padded);
     }
