@@ -104,7 +104,7 @@ impl RowSamples {
     /// window keeps weight 0.
     pub fn gradients(&mut self, rows: &[&[i16]], r_lo: isize, weights: &[f32]) {
         let weights = weights.get(..DESC_GRID).unwrap_or(&[0.0; DESC_GRID]);
-        for j in 0..DESC_GRID {
+        for (j, &weight) in weights.iter().enumerate() {
             self.dx[j] = 0.0;
             self.dy[j] = 0.0;
             self.wgt[j] = 0.0;
@@ -124,7 +124,7 @@ impl RowSamples {
             }
             self.dx[j] = (row[c + 1] as i32 - row[c - 1] as i32) as f32;
             self.dy[j] = (down[c] as i32 - up[c] as i32) as f32;
-            self.wgt[j] = weights[j];
+            self.wgt[j] = weight;
         }
     }
 
