@@ -84,7 +84,15 @@ pub fn convolve(rows: &[&[i16]], taps: &[i32], radius: usize, acc: &mut [i32], o
         return;
     }
     #[cfg(target_arch = "x86_64")]
-    let done = simd::convolve_sse2(rows, taps, radius, out);
+    let done = {
+        let start = if simd::has_avx2() {
+            // SAFETY: the CPU has AVX2 (checked at run time); rows are checked above.
+            unsafe { simd::convolve_avx2(rows, taps, radius, out) }
+        } else {
+            0
+        };
+        simd::convolve_sse2(rows, taps, radius, out, start)
+    };
     #[cfg(not(target_arch = "x86_64"))]
     let done = 0;
     let n = w.min(acc.len());
@@ -120,7 +128,13 @@ mod simd {
     /// 255 * 64), then two taps go into each `madd`: (s_0, s_1), (s_2, s_3), ... with the
     /// centre row as s_0 and a zero row after an odd last tap. The sums are the scalar
     /// path's exactly.
-    pub fn convolve_sse2(rows: &[&[i16]], taps: &[i32], radius: usize, out: &mut [i16]) -> usize {
+    pub fn convolve_sse2(
+        rows: &[&[i16]],
+        taps: &[i32],
+        radius: usize,
+        out: &mut [i16],
+        start: usize,
+    ) -> usize {
         let w = out.len();
         let blocks = w / 8;
         let radius = radius.min(MAX_RADIUS);
@@ -154,7 +168,7 @@ mod simd {
             // leaves s_radius alone with a zero.
             let full = radius.div_ceil(2);
             let odd_tail = radius >= 2 && radius.is_multiple_of(2);
-            for b in 0..blocks {
+            for b in start.div_ceil(8)..blocks {
                 let c = b * 8;
                 let x = _mm_loadu_si128(centre.add(c) as *const __m128i);
                 let s1 = if radius >= 1 { sym(1, c) } else { zero };
@@ -181,6 +195,102 @@ mod simd {
             }
         }
         blocks * 8
+    }
+
+    cpufeatures::new!(avx2_cpuid, "avx2");
+
+    /// Whether this CPU runs [`convolve_avx2`] (detected once).
+    pub fn has_avx2() -> bool {
+        avx2_cpuid::get()
+    }
+
+    /// Columns `0..w - w % 16` of [`super::convolve`], sixteen at a time: the arithmetic
+    /// of [`convolve_sse2`] on 256-bit registers. Returns how many were written.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2, and every row must hold at least `out.len()` values.
+    #[target_feature(enable = "avx2")]
+    pub unsafe fn convolve_avx2(
+        rows: &[&[i16]],
+        taps: &[i32],
+        radius: usize,
+        out: &mut [i16],
+    ) -> usize {
+        let w = out.len();
+        let blocks = w / 16;
+        let radius = radius.min(MAX_RADIUS);
+        // SAFETY: loads and stores touch columns `c..c + 16` with `c + 16 <= w`.
+        unsafe {
+            let round = _mm256_set1_epi32(1 << (KERNEL_BITS - 1));
+            let centre = rows[radius].as_ptr();
+            let tap = |j: usize| if j <= radius { taps[j] & 0xffff } else { 0 };
+            let mut kv = [_mm256_setzero_si256(); MAX_RADIUS / 2 + 1];
+            let pairs = radius / 2 + 1;
+            let mut m = 0;
+            while m < pairs {
+                kv[m] = _mm256_set1_epi32(tap(2 * m) | (tap(2 * m + 1) << 16));
+                m += 1;
+            }
+            let mut lp = [centre; MAX_RADIUS + 1];
+            let mut hp = [centre; MAX_RADIUS + 1];
+            for j in 1..=radius {
+                lp[j] = rows[radius - j].as_ptr();
+                hp[j] = rows[radius + j].as_ptr();
+            }
+            let zero = _mm256_setzero_si256();
+            // A macro, not a closure: closures do not inherit `target_feature`, and the
+            // intrinsics would become calls.
+            macro_rules! sym {
+                ($j:expr, $c:expr) => {
+                    _mm256_add_epi16(
+                        _mm256_loadu_si256(lp[$j].add($c) as *const __m256i),
+                        _mm256_loadu_si256(hp[$j].add($c) as *const __m256i),
+                    )
+                };
+            }
+            let full = radius.div_ceil(2);
+            let odd_tail = radius >= 2 && radius.is_multiple_of(2);
+            // Unpacking works within 128-bit halves: a0 holds columns 0-3 and 8-11, a1
+            // columns 4-7 and 12-15, and packing restores the order.
+            let mut b = 0;
+            while b < blocks {
+                let c = b * 16;
+                b += 1;
+                let x = _mm256_loadu_si256(centre.add(c) as *const __m256i);
+                let s1 = if radius >= 1 { sym!(1, c) } else { zero };
+                let k = kv[0];
+                let mut a0 =
+                    _mm256_add_epi32(round, _mm256_madd_epi16(_mm256_unpacklo_epi16(x, s1), k));
+                let mut a1 =
+                    _mm256_add_epi32(round, _mm256_madd_epi16(_mm256_unpackhi_epi16(x, s1), k));
+                // Plain index loop: iterator adapters are not inlined into a
+                // `target_feature` function and would cost a call per pair.
+                let mut m = 1;
+                while m < full {
+                    let k = kv[m];
+                    let s0 = sym!(2 * m, c);
+                    let s1 = sym!(2 * m + 1, c);
+                    a0 = _mm256_add_epi32(a0, _mm256_madd_epi16(_mm256_unpacklo_epi16(s0, s1), k));
+                    a1 = _mm256_add_epi32(a1, _mm256_madd_epi16(_mm256_unpackhi_epi16(s0, s1), k));
+                    m += 1;
+                }
+                if odd_tail {
+                    let s0 = sym!(radius, c);
+                    let k = kv[radius / 2];
+                    a0 =
+                        _mm256_add_epi32(a0, _mm256_madd_epi16(_mm256_unpacklo_epi16(s0, zero), k));
+                    a1 =
+                        _mm256_add_epi32(a1, _mm256_madd_epi16(_mm256_unpackhi_epi16(s0, zero), k));
+                }
+                a0 = _mm256_srai_epi32(a0, KERNEL_BITS as i32);
+                a1 = _mm256_srai_epi32(a1, KERNEL_BITS as i32);
+                _mm256_storeu_si256(
+                    out.as_mut_ptr().add(c) as *mut __m256i,
+                    _mm256_packs_epi32(a0, a1),
+                );
+            }
+        }
+        blocks * 16
     }
 }
 
