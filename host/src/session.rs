@@ -98,6 +98,9 @@ pub struct LinkStats {
 }
 
 /// Why a session call failed.
+/// MORE answers without a point before [`Session::pull_points`] gives up.
+const MAX_EMPTY_POINTS_ROUNDS: u32 = 8;
+
 #[derive(Debug, thiserror::Error)]
 pub enum SessionError {
     #[error("the firmware did not answer for {secs:.1} s over {link} while waiting for {what}")]
@@ -116,6 +119,10 @@ pub enum SessionError {
     Version { firmware: u8, host: u8 },
     #[error("cannot encode a {0:?} message")]
     Encode(MessageType),
+    #[error(
+        "the firmware keeps announcing more tie points without sending any ({rounds} requests)"
+    )]
+    PointsStalled { rounds: u32 },
 }
 
 /// Everything a session collected.
@@ -403,7 +410,11 @@ impl<T: Transport> Session<T> {
     /// firmware makes its whole window final first.
     pub fn pull_points(&mut self, flush: bool) -> Result<Vec<Points>, SessionError> {
         let mut flush = flush;
+        // Each MORE answer must bring points: a firmware that keeps announcing more
+        // without sending any would otherwise hold the host forever.
+        let mut stalled = 0u32;
         loop {
+            let before = self.point_records();
             self.points_answered = false;
             self.send_message(&Message::PointsRequest(PointsRequest {
                 flush: flush as u8,
@@ -413,7 +424,23 @@ impl<T: Transport> Session<T> {
             if !self.points_more {
                 return Ok(std::mem::take(&mut self.points));
             }
+            stalled = if self.point_records() > before {
+                0
+            } else {
+                stalled + 1
+            };
+            if stalled >= MAX_EMPTY_POINTS_ROUNDS {
+                return Err(SessionError::PointsStalled { rounds: stalled });
+            }
         }
+    }
+
+    /// Points and observations received so far by [`Session::pull_points`].
+    fn point_records(&self) -> usize {
+        self.points
+            .iter()
+            .map(|p| p.n_points as usize + p.n_obs as usize)
+            .sum()
     }
 
     /// The result of an epoch, if it arrived.

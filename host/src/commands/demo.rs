@@ -73,7 +73,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let outcome = run_dataset(&ds, &results, &run)?;
     print!("{}", summary(&outcome));
     println!(
-        "wrote {0}/poses.txt, eop.csv, report.json and report.html in {0}",
+        "wrote poses.txt, eop.csv, points.ply, efoto/, report.json and report.html in {}",
         results.display()
     );
     Ok(())
