@@ -16,6 +16,9 @@ pub const PENDING_PER_COLUMN: usize = 16;
 pub const PENDING_SCALE: usize = 5;
 /// Fewest SIFT pending candidates, whatever the width.
 pub const MIN_PENDING: usize = 256;
+/// Epipolar tolerance of the stereo search when the rig is estimated, pixels: the
+/// calibration it starts from may be off by a pixel on each camera.
+pub const RIG_ESTIMATION_TOLERANCE_PX: f32 = 3.0;
 
 /// Everything the traverse needs before the first frame: the rig, the datum, the
 /// stages' configurations and capacities.
@@ -299,6 +302,30 @@ pub const SEED2014_DATUM_SIGMA: f64 = 1e-3;
 pub const SEED2014_BASE_SIGMA_M: f64 = 1e-3;
 
 impl TraverseConfig {
+    /// Switches the estimation of the rig's relative orientation in the adjustment.
+    ///
+    /// Estimating the rig needs the vertical parallax the images really show: with
+    /// a rectified calibration the matcher would put each right point on its left
+    /// point's row (`rows_only`) and the rig's omega and kappa would only see the
+    /// calibration back. So the stereo search goes through the general rig geometry
+    /// (epipolar band of `RIG_ESTIMATION_TOLERANCE_PX`, wide enough for a pixel of
+    /// principal-point error on each camera) and the refinement searches both axes.
+    pub fn with_rig_estimation(mut self, on: bool) -> Self {
+        self.adjust.estimate_rig = on;
+        if on {
+            self.matching.stereo = StereoGeometry::Rig {
+                rig: self.rig,
+                tolerance_px: RIG_ESTIMATION_TOLERANCE_PX,
+                min_depth_m: 1.0,
+                max_depth_m: f64::INFINITY,
+            };
+            if let Some(r) = &mut self.matching.refine {
+                r.rows_only = false;
+            }
+        }
+        self
+    }
+
     /// The settings of `mode` applied to this configuration (capacities untouched
     /// except the window length and the track history that follows it).
     ///

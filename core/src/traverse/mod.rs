@@ -414,12 +414,14 @@ impl<'a> Traverse<'a> {
             _ => None,
         };
         let images = Some((*left, *right));
-        self.matcher.process_epoch(
-            cur,
-            prev,
-            images,
-            motion.as_ref().map(|m| (&self.cfg.rig, m)),
-        )
+        // Predict the right positions with the rig as last adjusted (the calibration
+        // when it is not estimated).
+        let mut rig = self.cfg.rig;
+        let r = self.window.rig();
+        rig.relative_angles = r.angles;
+        rig.base_m = r.base;
+        self.matcher
+            .process_epoch(cur, prev, images, motion.as_ref().map(|m| (&rig, m)))
     }
 
     /// Moves each tie point's current left position onto the spot its previous left
