@@ -124,6 +124,29 @@ fn rig_projection_jacobians_match_central_differences() {
                 assert!(close(num, pr.d_point[c][k], 1e-6));
             }
         }
+        // Interior orientation corrections of both cameras: the focal length goes into
+        // the projection, the principal point shifts it (only this camera's three count).
+        let corr = [0.002, -0.003, 0.01, -0.001, 0.004, -0.02];
+        let with = |c: &[f64; 6]| {
+            let fc = geometry::corrected_focal([f, f], cam, c);
+            let pr = project_rig(&left, &rig, cam, fc, &point).unwrap();
+            geometry::with_interior(pr, cam, fc, c)
+        };
+        let pi = with(&corr);
+        for i in 0..6 {
+            let (mut a, mut b) = (corr, corr);
+            a[i] += h;
+            b[i] -= h;
+            let (pa, pb) = (with(&a).xy, with(&b).xy);
+            for c in 0..2 {
+                let num = (pa[c] - pb[c]) / (2.0 * h);
+                assert!(
+                    close(num, pi.d_interior[c][i], 1e-6),
+                    "interior {i} coord {c}: {num} vs {}",
+                    pi.d_interior[c][i]
+                );
+            }
+        }
         // The right camera through the rig equals the explicit right pose.
         if cam == Camera::Right {
             let rp = geometry::camera_pose(&left, &rig, Camera::Right);

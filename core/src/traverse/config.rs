@@ -1,5 +1,7 @@
 //! Configuration of the whole traverse and its memory budget.
-use crate::adjust::{AdjustConfig, ConstraintSigmas, Correspondence, ResectionConfig, Robust};
+use crate::adjust::{
+    AdjustConfig, ConstraintSigmas, Correspondence, InteriorSigmas, ResectionConfig, Robust,
+};
 use crate::budget::{slice_bytes, ComponentKind, MemoryBudget};
 use crate::camera::{Pose, Rig};
 use crate::features::FeatureSet;
@@ -19,6 +21,10 @@ pub const MIN_PENDING: usize = 256;
 /// Epipolar tolerance of the stereo search when the rig is estimated, pixels: the
 /// calibration it starts from may be off by a pixel on each camera.
 pub const RIG_ESTIMATION_TOLERANCE_PX: f32 = 3.0;
+/// Standard deviation of a calibrated principal point, pixels (self-calibration prior).
+pub const CALIBRATION_PP_PX: f64 = 2.0;
+/// Relative standard deviation of a calibrated focal length (self-calibration prior).
+pub const CALIBRATION_FOCAL: f64 = 0.01;
 
 /// Everything the traverse needs before the first frame: the rig, the datum, the
 /// stages' configurations and capacities.
@@ -312,6 +318,7 @@ impl TraverseConfig {
     /// principal-point error on each camera) and the refinement searches both axes.
     pub fn with_rig_estimation(mut self, on: bool) -> Self {
         self.adjust.estimate_rig = on;
+        self.adjust.self_calibration = on.then(|| self.interior_sigmas());
         if on {
             self.matching.stereo = StereoGeometry::Rig {
                 rig: self.rig,
@@ -324,6 +331,23 @@ impl TraverseConfig {
             }
         }
         self
+    }
+
+    /// Calibration sigmas of the self-calibration that goes with the rig estimation:
+    /// [`CALIBRATION_PP_PX`] pixels for the principal points, [`CALIBRATION_FOCAL`] of the
+    /// focal lengths.
+    fn interior_sigmas(&self) -> InteriorSigmas {
+        let (l, r) = (&self.rig.left, &self.rig.right);
+        InteriorSigmas {
+            principal_point_mm: [
+                CALIBRATION_PP_PX * l.pixel_size_mm[0],
+                CALIBRATION_PP_PX * r.pixel_size_mm[0],
+            ],
+            focal_mm: [
+                CALIBRATION_FOCAL * l.focal_mm,
+                CALIBRATION_FOCAL * r.focal_mm,
+            ],
+        }
     }
 
     /// The settings of `mode` applied to this configuration (capacities untouched
