@@ -25,6 +25,9 @@ pub const RIG_ESTIMATION_TOLERANCE_PX: f32 = 3.0;
 pub const CALIBRATION_PP_PX: f64 = 2.0;
 /// Relative standard deviation of a calibrated focal length (self-calibration prior).
 pub const CALIBRATION_FOCAL: f64 = 0.01;
+/// The left (reference) camera's calibration sigmas are these times the right one's:
+/// its interior is held at the calibration (see `TraverseConfig::interior_sigmas`).
+pub const REFERENCE_CAMERA_FACTOR: f64 = 0.01;
 
 /// Everything the traverse needs before the first frame: the rig, the datum, the
 /// stages' configurations and capacities.
@@ -335,16 +338,26 @@ impl TraverseConfig {
 
     /// Calibration sigmas of the self-calibration that goes with the rig estimation:
     /// [`CALIBRATION_PP_PX`] pixels for the principal points, [`CALIBRATION_FOCAL`] of the
-    /// focal lengths.
+    /// focal lengths; the left camera's times [`REFERENCE_CAMERA_FACTOR`].
+    ///
+    /// Why the left camera is held: it is the reference of the traverse. Its principal
+    /// point trades against the attitude of every epoch (only the datum's fixed first
+    /// attitude tells them apart) and its focal length, with the right one, is the
+    /// common image scale, which a forward-moving rig hardly sees: left free, both
+    /// wander within their prior (1.4 % on `curves`) and the drift follows. What the
+    /// stereo geometry does determine is the right camera against the left one: its
+    /// focal length through the vertical parallax growing with the row, its principal
+    /// point (with the rig's angles) through the parallax offsets.
     fn interior_sigmas(&self) -> InteriorSigmas {
         let (l, r) = (&self.rig.left, &self.rig.right);
+        let k = REFERENCE_CAMERA_FACTOR;
         InteriorSigmas {
             principal_point_mm: [
-                CALIBRATION_PP_PX * l.pixel_size_mm[0],
+                k * CALIBRATION_PP_PX * l.pixel_size_mm[0],
                 CALIBRATION_PP_PX * r.pixel_size_mm[0],
             ],
             focal_mm: [
-                CALIBRATION_FOCAL * l.focal_mm,
+                k * CALIBRATION_FOCAL * l.focal_mm,
                 CALIBRATION_FOCAL * r.focal_mm,
             ],
         }
