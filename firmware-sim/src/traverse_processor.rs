@@ -69,7 +69,6 @@ pub fn traverse_config(c: &Configure) -> Result<TraverseConfig, BuildError> {
     let datum = Pose::from_params(&t.datum);
     let mut cfg = TraverseConfig::for_rig(rig, datum);
     cfg.sigma_px = t.sigma_px;
-    cfg.adjust.estimate_rig = t.estimate_rig;
     let n = p.keypoints_per_image.clamp(1, 100_000) as usize;
     cfg.sift.max_keypoints = n;
     cfg.matching.max_keypoints = n;
@@ -91,7 +90,7 @@ pub fn traverse_config(c: &Configure) -> Result<TraverseConfig, BuildError> {
     cfg.matching.max_tracks = (p.track_capacity as usize).max(1);
     // The mode's own settings (seed window lengths included) come last, then the
     // capacities that follow from the window.
-    let mut cfg = cfg.with_mode(t.mode);
+    let mut cfg = cfg.with_mode(t.mode).with_rig_estimation(t.estimate_rig);
     cfg.fit_capacities();
     Ok(cfg)
 }

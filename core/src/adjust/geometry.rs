@@ -76,6 +76,54 @@ pub struct RigProjection {
     pub d_rig: [[f64; 6]; 2],
     /// `d(xc, yc)/d(X, Y, Z)` of the point.
     pub d_point: [[f64; 3]; 2],
+    /// `d(xc, yc)/d(x0_L, y0_L, f_L, x0_R, y0_R, f_R)`: the interior orientation
+    /// corrections (see [`with_interior`]); zero unless they were applied.
+    pub d_interior: [[f64; 6]; 2],
+}
+
+/// Corrections of both cameras' interior orientation, mm, added to the calibration:
+/// `[x0_L, y0_L, f_L, x0_R, y0_R, f_R]` (principal point and focal length).
+///
+/// The observations are reduced with the calibrated principal point, so an error
+/// `dx0 = x0_true - x0_cal` shows as `xc = dx0 - (f_cal + df) u / w`.
+pub type InteriorCorrections = [f64; 6];
+
+/// Applies interior `corrections` to `pr`, a projection into `camera` computed with the
+/// corrected focal length `focal_mm` (calibrated plus `corrections`): adds the principal
+/// point shift and fills `d_interior` (`d xc / d f = xc / f` before the shift).
+pub fn with_interior(
+    mut pr: RigProjection,
+    camera: Camera,
+    focal_mm: f64,
+    corrections: &InteriorCorrections,
+) -> RigProjection {
+    let k = 3 * camera as usize;
+    for c in 0..2 {
+        pr.d_interior[c] = [0.0; 6];
+        pr.d_interior[c][k + c] = 1.0;
+        pr.d_interior[c][k + 2] = pr.xy[c] / focal_mm;
+        pr.xy[c] += corrections[k + c];
+    }
+    pr
+}
+
+/// [`with_interior`] for the coordinates alone.
+pub fn shift_principal_point(
+    xy: [f64; 2],
+    camera: Camera,
+    corrections: &InteriorCorrections,
+) -> [f64; 2] {
+    let k = 3 * camera as usize;
+    [xy[0] + corrections[k], xy[1] + corrections[k + 1]]
+}
+
+/// Focal length of `camera` with the interior corrections, mm.
+pub fn corrected_focal(
+    focal_mm: [f64; 2],
+    camera: Camera,
+    corrections: &InteriorCorrections,
+) -> f64 {
+    focal_mm[camera as usize] + corrections[3 * camera as usize + 2]
 }
 
 /// Projects `point` into `camera` of the rig whose left camera is at `left`.
@@ -195,6 +243,7 @@ pub fn project_with(
         d_pose: [[0.0; 6]; 2],
         d_rig: [[0.0; 6]; 2],
         d_point: [[0.0; 3]; 2],
+        d_interior: [[0.0; 6]; 2],
     };
     for a in 0..3 {
         out.d_pose[0][a] = gx.dot(&dq_ang[a]);

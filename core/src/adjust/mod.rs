@@ -42,9 +42,10 @@ pub mod window;
 #[cfg(test)]
 mod tests;
 
-pub use geometry::{Camera, RigParams};
+pub use geometry::{Camera, InteriorCorrections, RigParams};
 pub use intersection::{intersect, IntersectError, Intersection, Ray};
 pub use resection::{resect, Correspondence, ResectionConfig, ResectionError, ResectionResult};
 pub use window::{
-    AdjustConfig, AdjustError, ConstraintSigmas, Observation, Report, Robust, Window,
+    AdjustConfig, AdjustError, ConstraintSigmas, InteriorSigmas, Observation, Report, Robust,
+    Window,
 };

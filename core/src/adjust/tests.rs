@@ -9,6 +9,7 @@ use super::quality::{chi2_quantile, ChiSquareTest};
 use super::*;
 use crate::budget::{Arena, MemoryBudget};
 use crate::camera::{project, Interior, Pose, Rig};
+use nalgebra::Vector3;
 use std::vec;
 use std::vec::Vec;
 
@@ -122,6 +123,29 @@ fn rig_projection_jacobians_match_central_differences() {
             for c in 0..2 {
                 let num = (pa[c] - pb[c]) / (2.0 * h);
                 assert!(close(num, pr.d_point[c][k], 1e-6));
+            }
+        }
+        // Interior orientation corrections of both cameras: the focal length goes into
+        // the projection, the principal point shifts it (only this camera's three count).
+        let corr = [0.002, -0.003, 0.01, -0.001, 0.004, -0.02];
+        let with = |c: &[f64; 6]| {
+            let fc = geometry::corrected_focal([f, f], cam, c);
+            let pr = project_rig(&left, &rig, cam, fc, &point).unwrap();
+            geometry::with_interior(pr, cam, fc, c)
+        };
+        let pi = with(&corr);
+        for i in 0..6 {
+            let (mut a, mut b) = (corr, corr);
+            a[i] += h;
+            b[i] -= h;
+            let (pa, pb) = (with(&a).xy, with(&b).xy);
+            for c in 0..2 {
+                let num = (pa[c] - pb[c]) / (2.0 * h);
+                assert!(
+                    close(num, pi.d_interior[c][i], 1e-6),
+                    "interior {i} coord {c}: {num} vs {}",
+                    pi.d_interior[c][i]
+                );
             }
         }
         // The right camera through the rig equals the explicit right pose.
@@ -1211,4 +1235,159 @@ fn perturbed_rig_is_recovered_and_survives_slides() {
     for i in 4..6 {
         assert!((est[i] - truth[i]).abs() < 1e-3, "base {i}: {est:?}");
     }
+}
+
+/// A window over the whole scene (`Robust::None`, loose rig prior, base length held),
+/// solved; `right` maps each right observation (a calibration error of that camera).
+fn solve_with_right_error(
+    s: &Scene,
+    start: &Rig,
+    estimate_rig: bool,
+    self_calibration: Option<InteriorSigmas>,
+    right: impl Fn([f64; 2]) -> [f64; 2],
+) -> (RigParams, [f64; 6], InteriorCorrections, [f64; 6], f64, f64) {
+    let cfg = AdjustConfig {
+        window: s.poses.len(),
+        max_points: s.points.len(),
+        max_observations: s.obs.len(),
+        estimate_rig,
+        self_calibration,
+        robust: Robust::None,
+        sigmas: ConstraintSigmas {
+            rig_angle_rad: 0.01,
+            rig_base_m: 0.01,
+            base_length_m: 1e-4,
+            ..ConstraintSigmas::default()
+        },
+        ..AdjustConfig::default()
+    };
+    let mut mem = arena_for(&cfg);
+    let mut arena = Arena::new(&mut mem);
+    let mut w = Window::new(cfg, start, &mut arena).unwrap();
+    w.set_base_length(s.rig.base_length());
+    for p in &s.poses {
+        w.add_epoch(p, 0.0).unwrap();
+    }
+    let ids: Vec<u32> = s.points.iter().map(|p| w.add_point(*p).unwrap()).collect();
+    let wt = 1.0 / (SIGMA_MM * SIGMA_MM);
+    for (e, c, p, xy, _) in &s.obs {
+        let (cam, xy) = if *c == 0 {
+            (Camera::Left, *xy)
+        } else {
+            (Camera::Right, right(*xy))
+        };
+        w.add_observation(Observation::new(*e as u32, cam, ids[*p], xy, [wt, wt]))
+            .unwrap();
+    }
+    let r = w.solve().unwrap();
+    assert!(r.converged, "{r:?}");
+    // RMS error of the adjusted points against the truth, metres.
+    let sq: f64 = ids
+        .iter()
+        .zip(&s.points)
+        .filter_map(|(id, t)| {
+            w.point(*id)
+                .map(|p| (0..3).map(|a| (p[a] - t[a]).powi(2)).sum::<f64>())
+        })
+        .sum();
+    let rms = libm::sqrt(sq / ids.len() as f64);
+    (
+        w.rig(),
+        w.rig_std(),
+        w.interior(),
+        w.interior_std(),
+        r.sigma0,
+        rms,
+    )
+}
+
+#[test]
+fn right_principal_point_error_is_absorbed_by_the_rig_phi() {
+    // The right camera's calibrated principal point is 1 px off in x: every right
+    // observation is shifted by one pixel, a disparity offset. A relative rotation phi
+    // of about 1/f rad moves the right image the same way (up to (x/f)^2 off the
+    // centre), so the estimated rig takes it and the residuals stay at the noise.
+    let s = scene(91, 5, 300, 0.0);
+    let shift = |xy: [f64; 2]| [xy[0] + PIXEL_MM, xy[1]];
+    // The equivalent angle: the shift over d(xc)/d(phi) at the right image's centre.
+    let left = s.poses[0];
+    let rp = RigParams::from_rig(&s.rig);
+    let right_pose = geometry::camera_pose(&left, &rp, Camera::Right);
+    let ahead =
+        right_pose.centre_vec() + right_pose.rotation().transpose() * Vector3::new(0.0, 0.0, -10.0);
+    let pr = project_rig(
+        &left,
+        &rp,
+        Camera::Right,
+        8.0,
+        &[ahead[0], ahead[1], ahead[2]],
+    )
+    .unwrap();
+    let equivalent = PIXEL_MM / pr.d_rig[0][1];
+    assert!((equivalent.abs() - PIXEL_MM / 8.0).abs() < 1e-3 * PIXEL_MM / 8.0);
+
+    let (rig, sd, _, _, sigma0, rms) = solve_with_right_error(&s, &s.rig, true, None, shift);
+    let dphi = rig.angles[1] - s.rig.relative_angles[1];
+    assert!(
+        (dphi - equivalent).abs() < 0.1 * equivalent.abs(),
+        "phi moved by {dphi} rad, the 1 px equivalent is {equivalent} (std {})",
+        sd[1]
+    );
+    assert!(sigma0 < 1.15, "sigma0 {sigma0} with the rig estimated");
+    // The base keeps its calibrated direction within 3 sigma: the angle took the error.
+    for a in 1..3 {
+        assert!(
+            (rig.base[a] - s.rig.base_m[a]).abs() < 3.0 * sd[3 + a],
+            "base {a}: {rig:?}"
+        );
+    }
+    // With the rig held at the calibration the points take the offset as depth.
+    let (_, _, _, _, _, fixed) = solve_with_right_error(&s, &s.rig, false, None, shift);
+    assert!(
+        fixed > 2.0 * rms,
+        "point RMS {fixed} m with the rig fixed, {rms} m estimated"
+    );
+}
+
+#[test]
+fn right_focal_error_is_absorbed_by_the_self_calibration() {
+    // The right camera's calibrated focal length is 0.6 % short (the two cameras'
+    // calibration errors of 0.3 % with opposite signs). No relative orientation
+    // explains a scale between the images: the base's y and z components bend to
+    // absorb it. With the self-calibration the right focal length takes it and the
+    // base stays where it is.
+    let s = scene(92, 5, 300, 0.0);
+    let mut start = s.rig;
+    start.right.focal_mm = 8.0 * (1.0 - 0.006);
+    let held = InteriorSigmas {
+        principal_point_mm: [1e-4, 0.01],
+        focal_mm: [1e-4, 0.08],
+    };
+    let (rig, sd, intr, isd, sigma0, _) =
+        solve_with_right_error(&s, &start, true, Some(held), |xy| xy);
+    let df = 8.0 * 0.006;
+    assert!(
+        (intr[5] - df).abs() < 3.0 * isd[5] && (intr[5] - df).abs() < 0.05 * df,
+        "right focal correction {} mm (std {}), truth {df}",
+        intr[5],
+        isd[5]
+    );
+    assert!(sigma0 < 1.15, "sigma0 {sigma0}");
+    let truth = RigParams::from_rig(&s.rig).to_array();
+    let est = rig.to_array();
+    for i in 0..6 {
+        assert!(
+            (est[i] - truth[i]).abs() < 4.0 * sd[i],
+            "rig {i}: {est:?} vs {truth:?} (std {sd:?})"
+        );
+    }
+    // Without it the base moves by many of its own sigmas and sigma0 grows.
+    let (bent, bsd, _, _, s0, _) = solve_with_right_error(&s, &start, true, None, |xy| xy);
+    let off = (1..3)
+        .map(|a| (bent.base[a] - s.rig.base_m[a]).abs() / bsd[3 + a])
+        .fold(0.0, f64::max);
+    assert!(
+        off > 5.0 || s0 > 1.5 * sigma0,
+        "base {bent:?} ({off} sigma), sigma0 {s0}"
+    );
 }

@@ -23,7 +23,10 @@
 
 use super::cholesky;
 use super::constraints::{base_length, distance, prior_residual, smoothness};
-use super::geometry::{project_rig, project_with, project_xy, Camera, RigParams, Rotations};
+use super::geometry::{
+    corrected_focal, project_rig, project_with, project_xy, shift_principal_point, with_interior,
+    Camera, InteriorCorrections, RigParams, Rotations,
+};
 use super::quality::ChiSquareTest;
 use super::weighting::{cauchy_factor, median_by_rank, CHI2_2_MEDIAN, SEED_REWEIGHT};
 use crate::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget, OutOfMemory};
@@ -59,6 +62,47 @@ impl Default for ConstraintSigmas {
             base_length_m: 0.0,
             velocity_change_mps: 0.0,
         }
+    }
+}
+
+/// Standard deviations of the interior orientation's calibration (the prior of the
+/// self-calibration), index 0 left, 1 right.
+///
+/// Why: a differential focal length error between the cameras scales the right
+/// image against the left (0.6 % is 1.4 px at the image's top and bottom), which no
+/// relative orientation can take: left free, the base's y and z components absorb it
+/// as a depth-dependent scale and the traverse drifts by several percent.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InteriorSigmas {
+    /// Principal point (both coordinates), mm.
+    pub principal_point_mm: [f64; 2],
+    /// Focal length, mm.
+    pub focal_mm: [f64; 2],
+}
+
+impl InteriorSigmas {
+    /// Diagonal information `[x0_L, y0_L, f_L, x0_R, y0_R, f_R]` (row-major 6x6).
+    fn information(&self) -> [f64; 36] {
+        let mut info = [0.0; 36];
+        for cam in 0..2 {
+            let sig = [
+                self.principal_point_mm[cam],
+                self.principal_point_mm[cam],
+                self.focal_mm[cam],
+            ];
+            for (k, sg) in sig.iter().enumerate() {
+                let i = 3 * cam + k;
+                info[i * 6 + i] = 1.0 / (sg * sg);
+            }
+        }
+        info
+    }
+
+    fn valid(&self) -> bool {
+        self.principal_point_mm
+            .iter()
+            .chain(self.focal_mm.iter())
+            .all(|s| *s > 0.0 && s.is_finite())
     }
 }
 
@@ -98,6 +142,10 @@ pub struct AdjustConfig {
     pub max_robust_rounds: usize,
     /// Estimate the relative orientation (with the prior of `sigmas`) or keep it fixed.
     pub estimate_rig: bool,
+    /// Self-calibration: estimate corrections to both cameras' principal point and
+    /// focal length (one set for the whole traverse, as the rig) with a prior of
+    /// these sigmas around the calibration; `None` keeps the interior fixed.
+    pub self_calibration: Option<InteriorSigmas>,
     pub sigmas: ConstraintSigmas,
     pub robust: Robust,
     /// Convergence: relative decrease of `vTPv` below this stops the iterations.
@@ -117,6 +165,7 @@ impl Default for AdjustConfig {
             max_iterations: 50,
             max_robust_rounds: 8,
             estimate_rig: false,
+            self_calibration: None,
             sigmas: ConstraintSigmas::default(),
             robust: Robust::snooping(),
             tolerance: 1e-12,
@@ -285,13 +334,15 @@ const PT_PRIOR: u32 = 2;
 const PT_EXCLUDED: u32 = 4;
 
 /// Per camera block scratch of one point: `W` (6x3), the block's own `U`
-/// (6x6), its cross block with the rig (6x6) and its gradient.
+/// (6x6), its cross blocks with the rig and with the interior orientation
+/// (6x6 each, `J_this^T P J_other`) and its gradient.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 struct BlockScratch {
     w: [f64; 18],
     u: [f64; 36],
     u_rig: [f64; 36],
+    u_interior: [f64; 36],
     g: [f64; 6],
 }
 
@@ -349,6 +400,13 @@ pub struct Window<'a> {
     rig_cov: [f64; 36],
     rig_cov_valid: bool,
     rig_rot: Rotations,
+    /// Interior orientation corrections (self-calibration), their prior and
+    /// information, carried across slides like the rig's.
+    interior: InteriorCorrections,
+    interior_prior: InteriorCorrections,
+    interior_prior_info: [f64; 36],
+    interior_std: [f64; 6],
+    interior_cov: [f64; 36],
     origin: [f64; 3],
     epochs: &'a mut [EpochSlot],
     n_epochs: usize,
@@ -372,18 +430,24 @@ pub struct Window<'a> {
 }
 
 impl AdjustConfig {
+    /// Parameter blocks besides the epochs: the rig's (always reserved) and the
+    /// interior orientation's (with self-calibration).
+    fn extra_blocks(&self) -> usize {
+        1 + self.self_calibration.is_some() as usize
+    }
+
     fn cam_capacity(&self) -> usize {
-        6 * (self.window + 1)
+        6 * (self.window + self.extra_blocks())
     }
 
     /// Adds the adjustment's buffers ("adjust." prefix) to `budget`. Sizes
     /// saturate instead of overflowing, so an absurd configuration gives an
     /// absurd budget (and `Window::new` refuses it), never a panic.
     pub fn budget(&self, budget: &mut MemoryBudget) {
-        let nc = 6usize.saturating_mul(self.window.saturating_add(1));
+        let nc = 6usize.saturating_mul(self.window.saturating_add(self.extra_blocks()));
         let (p, o, w) = (self.max_points, self.max_observations, self.window);
         let p1 = p.saturating_add(1);
-        let w1 = w.saturating_add(1);
+        let w1 = w.saturating_add(self.extra_blocks());
         budget.add(
             "adjust.epochs",
             ComponentKind::Storage,
@@ -436,6 +500,7 @@ impl AdjustConfig {
             && s.datum_angle_rad > 0.0
             && s.datum_position_m > 0.0
             && (!self.estimate_rig || (s.rig_angle_rad > 0.0 && s.rig_base_m > 0.0))
+            && self.self_calibration.is_none_or(|c| c.valid())
             && self.tolerance.is_finite();
         if ok {
             Ok(())
@@ -495,8 +560,8 @@ impl<'a> Window<'a> {
         let rhs = arena.alloc_slice::<f64>(nc)?;
         let saved_cam = arena.alloc_slice::<f64>(nc)?;
         let saved_points = arena.alloc_slice::<f64>(3 * p)?;
-        let scratch = arena.alloc_slice::<BlockScratch>(w + 1)?;
-        let touched = arena.alloc_slice::<u32>(w + 1)?;
+        let scratch = arena.alloc_slice::<BlockScratch>(w + cfg.extra_blocks())?;
+        let touched = arena.alloc_slice::<u32>(w + cfg.extra_blocks())?;
         let residuals = arena.alloc_slice::<f64>(o)?;
         let r = RigParams::from_rig(rig);
         Ok(Window {
@@ -510,6 +575,11 @@ impl<'a> Window<'a> {
             rig_cov: [0.0; 36],
             rig_cov_valid: false,
             rig_rot: Rotations::new(r.angles[0], r.angles[1], r.angles[2]),
+            interior: [0.0; 6],
+            interior_prior: [0.0; 6],
+            interior_prior_info: cfg.self_calibration.map_or([0.0; 36], |c| c.information()),
+            interior_std: [0.0; 6],
+            interior_cov: [0.0; 36],
             origin: [0.0; 3],
             epochs,
             n_epochs: 0,
@@ -816,6 +886,17 @@ impl<'a> Window<'a> {
         self.rig_std
     }
 
+    /// Interior orientation corrections `[x0_L, y0_L, f_L, x0_R, y0_R, f_R]` (mm)
+    /// found by the self-calibration (zero without it).
+    pub fn interior(&self) -> InteriorCorrections {
+        self.interior
+    }
+
+    /// Standard deviations of [`Self::interior`] (zero without self-calibration).
+    pub fn interior_std(&self) -> [f64; 6] {
+        self.interior_std
+    }
+
     pub fn observations(&self) -> &[Observation] {
         &self.obs[..self.n_obs]
     }
@@ -838,11 +919,12 @@ impl<'a> Window<'a> {
             &pose,
             &self.rig,
             cam,
-            self.focal[o.camera as usize],
+            corrected_focal(self.focal, cam, &self.interior),
             &self.points[o.point as usize].xyz,
         )
         .ok()?;
-        Some([o.xy[0] as f64 - pr.xy[0], o.xy[1] as f64 - pr.xy[1]])
+        let xy = shift_principal_point(pr.xy, cam, &self.interior);
+        Some([o.xy[0] as f64 - xy[0], o.xy[1] as f64 - xy[1]])
     }
 
     /// Items refused because a capacity was full: (points, observations).
@@ -927,23 +1009,31 @@ impl<'a> Window<'a> {
     /// epoch's worth per slide (carrying the whole marginal would count the
     /// remaining epochs' observations again at every slide and make the rig
     /// overconfident). Uses `Q` without sigma0, like the calibration prior.
+    /// The interior orientation corrections are carried the same way.
     fn carry_rig_prior(&mut self) {
-        if !(self.cfg.estimate_rig && self.rig_cov_valid) {
-            return;
-        }
-        let mut marginal = [0.0; 36];
-        if !invert6(&self.rig_cov, &mut marginal) {
+        if !self.rig_cov_valid {
             return;
         }
         let n = self.n_epochs.max(1) as f64;
-        let mut info = self.rig_prior_info;
-        for (i, m) in info.iter_mut().zip(marginal) {
-            *i += (m - *i) / n;
+        if self.cfg.estimate_rig {
+            let mut prior = self.rig_prior.to_array();
+            carry_prior(
+                &self.rig.to_array(),
+                &self.rig_cov,
+                n,
+                &mut prior,
+                &mut self.rig_prior_info,
+            );
+            self.rig_prior = RigParams::from_array(&prior);
         }
-        let mut check = [0.0; 36];
-        if invert6(&info, &mut check) {
-            self.rig_prior = self.rig;
-            self.rig_prior_info = info;
+        if self.cfg.self_calibration.is_some() {
+            carry_prior(
+                &self.interior,
+                &self.interior_cov,
+                n,
+                &mut self.interior_prior,
+                &mut self.interior_prior_info,
+            );
         }
         self.rig_cov_valid = false;
     }
@@ -974,8 +1064,38 @@ impl<'a> Window<'a> {
         self.cfg.estimate_rig.then_some(self.n_epochs)
     }
 
+    /// Block of the interior orientation corrections: the last one.
+    fn interior_block(&self) -> Option<usize> {
+        self.cfg
+            .self_calibration
+            .map(|_| self.n_epochs + self.cfg.estimate_rig as usize)
+    }
+
     fn n_cam(&self) -> usize {
-        6 * (self.n_epochs + self.cfg.estimate_rig as usize)
+        6 * (self.n_epochs
+            + self.cfg.estimate_rig as usize
+            + self.cfg.self_calibration.is_some() as usize)
+    }
+
+    /// Scratch index of the rig's block (the epochs use their slot).
+    fn rig_scratch(&self) -> usize {
+        self.cfg.window
+    }
+
+    /// Scratch index of the interior orientation's block.
+    fn interior_scratch(&self) -> usize {
+        self.cfg.window + 1
+    }
+
+    /// Block of the reduced system for scratch index `sidx`.
+    fn block_of(&self, sidx: usize) -> usize {
+        if sidx < self.cfg.window {
+            sidx
+        } else if sidx == self.rig_scratch() {
+            self.rig_block().unwrap_or(0)
+        } else {
+            self.interior_block().unwrap_or(0)
+        }
     }
 
     /// Projection through the cached rotations of epoch `slot` and the rig.
@@ -987,8 +1107,8 @@ impl<'a> Window<'a> {
     ) -> Result<super::geometry::RigProjection, crate::camera::CameraError> {
         let e = &self.epochs[slot];
         let c = [e.params[3], e.params[4], e.params[5]];
-        let f = self.focal[cam as usize];
-        project_with(
+        let f = corrected_focal(self.focal, cam, &self.interior);
+        let pr = project_with(
             &Rotations(e.rot),
             &c,
             &self.rig_rot,
@@ -996,7 +1116,8 @@ impl<'a> Window<'a> {
             cam,
             f,
             xyz,
-        )
+        )?;
+        Ok(with_interior(pr, cam, f, &self.interior))
     }
 
     /// Recomputes the cached rotations after the parameters changed.
@@ -1053,6 +1174,7 @@ impl<'a> Window<'a> {
         let mut touched = 0usize;
         let xyz = self.points[p].xyz;
         let rig_block = self.rig_block();
+        let interior_block = self.interior_block();
         let (s0, s1) = (
             self.point_start[p] as usize,
             self.point_start[p + 1] as usize,
@@ -1100,24 +1222,21 @@ impl<'a> Window<'a> {
             if !want_cam {
                 continue;
             }
-            // Camera blocks touched by this observation: its epoch, and the rig.
+            // Camera blocks touched by this observation (scratch index, Jacobian):
+            // its epoch, the rig (right camera), the interior orientation.
+            let on_rig = cam == Camera::Right && rig_block.is_some();
             let blocks = [
-                Some(slot),
-                if cam == Camera::Right {
-                    rig_block
-                } else {
-                    None
-                },
+                Some((slot, &pr.d_pose)),
+                on_rig.then_some((self.rig_scratch(), &pr.d_rig)),
+                interior_block.map(|_| (self.interior_scratch(), &pr.d_interior)),
             ];
             for (which, blk) in blocks.iter().enumerate() {
-                let Some(blk) = *blk else { continue };
-                let sidx = if which == 0 { blk } else { self.cfg.window };
+                let Some((sidx, jc)) = *blk else { continue };
                 if !self.touched[..touched].contains(&(sidx as u32)) {
                     self.touched[touched] = sidx as u32;
                     touched += 1;
                     self.scratch[sidx] = BlockScratch::zeroed();
                 }
-                let jc = if which == 0 { &pr.d_pose } else { &pr.d_rig };
                 let sc = &mut self.scratch[sidx];
                 for c in 0..2 {
                     for i in 0..6 {
@@ -1129,16 +1248,16 @@ impl<'a> Window<'a> {
                         for j in 0..3 {
                             sc.w[i * 3 + j] += wi * pr.d_point[c][j];
                         }
-                    }
-                }
-                if which == 0 && cam == Camera::Right && rig_block.is_some() {
-                    // Cross block epoch x rig: J_pose^T W J_rig.
-                    let sc = &mut self.scratch[sidx];
-                    for c in 0..2 {
-                        for i in 0..6 {
-                            let wi = wt[c] * pr.d_pose[c][i];
+                        // Cross blocks with the later blocks: epoch x rig, epoch x
+                        // interior, rig x interior (J_this^T W J_other).
+                        if which == 0 && on_rig {
                             for j in 0..6 {
                                 sc.u_rig[i * 6 + j] += wi * pr.d_rig[c][j];
+                            }
+                        }
+                        if which < 2 && interior_block.is_some() {
+                            for j in 0..6 {
+                                sc.u_interior[i * 6 + j] += wi * pr.d_interior[c][j];
                             }
                         }
                     }
@@ -1192,6 +1311,11 @@ impl<'a> Window<'a> {
             }
             self.rig = RigParams::from_array(&r);
         }
+        if let Some(ib) = self.interior_block() {
+            for i in 0..6 {
+                self.interior[i] += self.rhs[6 * ib + i];
+            }
+        }
         Ok(())
     }
 
@@ -1201,6 +1325,7 @@ impl<'a> Window<'a> {
         self.refresh_rotations();
         let nc = self.n_cam();
         let rig_block = self.rig_block();
+        let interior_block = self.interior_block();
         self.reduced[..nc * nc].fill(0.0);
         self.rhs[..nc].fill(0.0);
         for p in 0..self.n_point_slots {
@@ -1213,24 +1338,29 @@ impl<'a> Window<'a> {
             };
             for ti in 0..pb.touched {
                 let a = self.touched[ti] as usize;
-                let ba = if a == self.cfg.window {
-                    rig_block.unwrap_or(0)
-                } else {
-                    a
-                };
+                let ba = self.block_of(a);
                 let sa = self.scratch[a];
-                // U, gradient, and the cross block with the rig.
+                // U, gradient, and the cross blocks with the rig and the interior.
                 for i in 0..6 {
                     self.rhs[6 * ba + i] += sa.g[i];
                     for j in 0..6 {
                         self.reduced[(6 * ba + i) * nc + 6 * ba + j] += sa.u[i * 6 + j];
                     }
                 }
-                if let (Some(rb), true) = (rig_block, a != self.cfg.window) {
+                // Row (later block) param i, column (this block) param j: the
+                // transpose of J_this^T W J_other. Both later blocks follow the epochs.
+                let crosses = [
+                    (rig_block.filter(|_| a < self.cfg.window), &sa.u_rig),
+                    (
+                        interior_block.filter(|_| a != self.interior_scratch()),
+                        &sa.u_interior,
+                    ),
+                ];
+                for (later, cross) in crosses {
+                    let Some(lb) = later else { continue };
                     for i in 0..6 {
                         for j in 0..6 {
-                            // Row rig param i, column epoch param j: (J_pose^T W J_rig)^T.
-                            self.reduced[(6 * rb + i) * nc + 6 * ba + j] += sa.u_rig[j * 6 + i];
+                            self.reduced[(6 * lb + i) * nc + 6 * ba + j] += cross[j * 6 + i];
                         }
                     }
                 }
@@ -1243,11 +1373,7 @@ impl<'a> Window<'a> {
                 }
                 for tj in 0..pb.touched {
                     let bidx = self.touched[tj] as usize;
-                    let bb = if bidx == self.cfg.window {
-                        rig_block.unwrap_or(0)
-                    } else {
-                        bidx
-                    };
+                    let bb = self.block_of(bidx);
                     if bb > ba {
                         continue;
                     }
@@ -1266,7 +1392,6 @@ impl<'a> Window<'a> {
 
     /// Point steps `dp = V^-1 (b_p - W^T dc)` with the camera step in `rhs`, applied.
     fn back_substitute(&mut self, lambda: f64) {
-        let rig_block = self.rig_block();
         for p in 0..self.n_point_slots {
             if self.points[p].flags & (PT_USED | PT_EXCLUDED) != PT_USED {
                 continue;
@@ -1278,11 +1403,7 @@ impl<'a> Window<'a> {
             let mut rhs = pb.b;
             for ti in 0..pb.touched {
                 let a = self.touched[ti] as usize;
-                let ba = if a == self.cfg.window {
-                    rig_block.unwrap_or(0)
-                } else {
-                    a
-                };
+                let ba = self.block_of(a);
                 let wa = nalgebra::Matrix6x3::from_row_slice(&self.scratch[a].w);
                 let dc = nalgebra::Vector6::from_column_slice(&self.rhs[6 * ba..6 * ba + 6]);
                 rhs -= wa.transpose() * dc;
@@ -1388,6 +1509,24 @@ impl<'a> Window<'a> {
                 count += 1;
             }
         }
+        if let Some(ib) = self.interior_block() {
+            let r = prior_residual(&self.interior, &self.interior_prior);
+            let info = self.interior_prior_info;
+            for i in 0..6 {
+                let mut ir = 0.0;
+                for j in 0..6 {
+                    ir += info[i * 6 + j] * r[j];
+                    if normal {
+                        self.reduced[(6 * ib + i) * nc + 6 * ib + j] += info[i * 6 + j];
+                    }
+                }
+                cost += r[i] * ir;
+                if normal {
+                    self.rhs[6 * ib + i] -= ir;
+                }
+            }
+            count += 6;
+        }
         for e in 0..self.n_epochs {
             let ep = self.epochs[e];
             let centres =
@@ -1482,7 +1621,7 @@ impl<'a> Window<'a> {
                 Camera::Right
             };
             let c = [e.params[3], e.params[4], e.params[5]];
-            let f = self.focal[o.camera as usize];
+            let f = corrected_focal(self.focal, cam, &self.interior);
             match project_xy(
                 &Rotations(e.rot),
                 &c,
@@ -1493,6 +1632,7 @@ impl<'a> Window<'a> {
                 &pt.xyz,
             ) {
                 Some(xy) => {
+                    let xy = shift_principal_point(xy, cam, &self.interior);
                     let r = [o.xy[0] as f64 - xy[0], o.xy[1] as f64 - xy[1]];
                     let w = o.weights();
                     cost += o.factor as f64 * (w[0] * r[0] * r[0] + w[1] * r[1] * r[1]);
@@ -1524,6 +1664,9 @@ impl<'a> Window<'a> {
         if let Some(rb) = self.rig_block() {
             self.saved_cam[6 * rb..6 * rb + 6].copy_from_slice(&self.rig.to_array());
         }
+        if let Some(ib) = self.interior_block() {
+            self.saved_cam[6 * ib..6 * ib + 6].copy_from_slice(&self.interior);
+        }
         let _ = nc;
         for p in 0..self.n_point_slots {
             self.saved_points[3 * p..3 * p + 3].copy_from_slice(&self.points[p].xyz);
@@ -1540,6 +1683,10 @@ impl<'a> Window<'a> {
             let mut r = [0.0; 6];
             r.copy_from_slice(&self.saved_cam[6 * rb..6 * rb + 6]);
             self.rig = RigParams::from_array(&r);
+        }
+        if let Some(ib) = self.interior_block() {
+            self.interior
+                .copy_from_slice(&self.saved_cam[6 * ib..6 * ib + 6]);
         }
         for p in 0..self.n_point_slots {
             self.points[p]
@@ -1970,8 +2117,16 @@ impl<'a> Window<'a> {
                 }
                 self.rig_std[i] = libm::sqrt((s02 * self.rig_cov[i * 6 + i]).max(0.0));
             }
-            self.rig_cov_valid = true;
         }
+        if let Some(ib) = self.interior_block() {
+            for i in 0..6 {
+                for j in 0..6 {
+                    self.interior_cov[i * 6 + j] = self.reduced[(6 * ib + i) * nc + 6 * ib + j];
+                }
+                self.interior_std[i] = libm::sqrt((s02 * self.interior_cov[i * 6 + i]).max(0.0));
+            }
+        }
+        self.rig_cov_valid = true;
         // Points: Q_pp = V^-1 + V^-1 W^T Q_cc W V^-1.
         for p in 0..self.n_point_slots {
             if self.points[p].flags & (PT_USED | PT_EXCLUDED) != PT_USED {
@@ -1984,19 +2139,11 @@ impl<'a> Window<'a> {
             let mut q = vinv;
             for ti in 0..pb.touched {
                 let a = self.touched[ti] as usize;
-                let ba = if a == self.cfg.window {
-                    rig_block.unwrap_or(0)
-                } else {
-                    a
-                };
+                let ba = self.block_of(a);
                 let ga = nalgebra::Matrix6x3::from_row_slice(&self.scratch[a].w) * vinv;
                 for tj in 0..pb.touched {
                     let b = self.touched[tj] as usize;
-                    let bb = if b == self.cfg.window {
-                        rig_block.unwrap_or(0)
-                    } else {
-                        b
-                    };
+                    let bb = self.block_of(b);
                     let gb = nalgebra::Matrix6x3::from_row_slice(&self.scratch[b].w) * vinv;
                     let qab = nalgebra::Matrix6::from_fn(|i, j| {
                         self.reduced[(6 * ba + i) * nc + 6 * bb + j]
@@ -2022,6 +2169,32 @@ impl<'a> Window<'a> {
             self.singular_epoch = Some(slot.min(self.n_epochs.saturating_sub(1)));
             AdjustError::Singular { epoch: slot }
         })
+    }
+}
+
+/// One slide's update of a shared block's prior (see `Window::carry_rig_prior`): the
+/// information grows by `1/n` of what the window's observations added to it (from the
+/// cofactor `cov` of the last solution), centred at the estimate `est`. Left
+/// unchanged when a matrix is not positive definite.
+fn carry_prior(
+    est: &[f64; 6],
+    cov: &[f64; 36],
+    n: f64,
+    prior: &mut [f64; 6],
+    info: &mut [f64; 36],
+) {
+    let mut marginal = [0.0; 36];
+    if !invert6(cov, &mut marginal) {
+        return;
+    }
+    let mut next = *info;
+    for (i, m) in next.iter_mut().zip(marginal) {
+        *i += (m - *i) / n;
+    }
+    let mut check = [0.0; 36];
+    if invert6(&next, &mut check) {
+        *prior = *est;
+        *info = next;
     }
 }
 
@@ -2055,6 +2228,10 @@ mod tests {
         let cfg = AdjustConfig {
             window: 4,
             estimate_rig: true,
+            self_calibration: Some(InteriorSigmas {
+                principal_point_mm: [0.01, 0.02],
+                focal_mm: [0.03, 0.04],
+            }),
             sigmas: ConstraintSigmas {
                 datum_angle_rad: 0.01,
                 datum_position_m: 0.01,
@@ -2087,6 +2264,7 @@ mod tests {
         w.epochs[0].params[0] += 0.001;
         w.epochs[0].params[4] += 0.002;
         w.rig = RigParams::from_array(&[0.012, -0.018, 0.004, 0.51, 0.012, -0.019]);
+        w.interior = [0.003, -0.002, 0.01, -0.004, 0.001, -0.02];
         w.build_index();
         w.build(0.0);
         let nc = w.n_cam();
@@ -2097,10 +2275,12 @@ mod tests {
             let val = |w: &mut Window, d: f64| {
                 if blk < w.n_epochs {
                     w.epochs[blk].params[k] += d;
-                } else {
+                } else if Some(blk) == w.rig_block() {
                     let mut r = w.rig.to_array();
                     r[k] += d;
                     w.rig = RigParams::from_array(&r);
+                } else {
+                    w.interior[k] += d;
                 }
             };
             val(&mut w, h);
@@ -2131,6 +2311,10 @@ mod tests {
             max_points: 12,
             max_observations: s.obs.len(),
             estimate_rig: true,
+            self_calibration: Some(InteriorSigmas {
+                principal_point_mm: [0.02, 0.02],
+                focal_mm: [0.05, 0.05],
+            }),
             robust: Robust::None,
             sigmas: ConstraintSigmas {
                 datum_angle_rad: 1e-3,
@@ -2161,6 +2345,8 @@ mod tests {
         r[1] += 1e-4;
         r[3] += 2e-3;
         w.rig = RigParams::from_array(&r);
+        w.interior[1] += 4e-4;
+        w.interior[5] -= 2e-3;
         for p in 0..w.n_point_slots {
             w.points[p].xyz[1] += 5e-3;
         }
@@ -2172,10 +2358,12 @@ mod tests {
                 let bump = |w: &mut Window, d: f64| {
                     if i < 6 * w.n_epochs {
                         w.epochs[i / 6].params[i % 6] += d;
-                    } else if i < n_cam {
+                    } else if i < 6 * w.n_epochs + 6 {
                         let mut r = w.rig.to_array();
                         r[i - 6 * w.n_epochs] += d;
                         w.rig = RigParams::from_array(&r);
+                    } else if i < n_cam {
+                        w.interior[i - 6 * w.n_epochs - 6] += d;
                     } else {
                         let k = i - n_cam;
                         w.points[k / 3].xyz[k % 3] += d;

@@ -1,5 +1,7 @@
 //! Configuration of the whole traverse and its memory budget.
-use crate::adjust::{AdjustConfig, ConstraintSigmas, Correspondence, ResectionConfig, Robust};
+use crate::adjust::{
+    AdjustConfig, ConstraintSigmas, Correspondence, InteriorSigmas, ResectionConfig, Robust,
+};
 use crate::budget::{slice_bytes, ComponentKind, MemoryBudget};
 use crate::camera::{Pose, Rig};
 use crate::features::FeatureSet;
@@ -16,6 +18,16 @@ pub const PENDING_PER_COLUMN: usize = 16;
 pub const PENDING_SCALE: usize = 5;
 /// Fewest SIFT pending candidates, whatever the width.
 pub const MIN_PENDING: usize = 256;
+/// Epipolar tolerance of the stereo search when the rig is estimated, pixels: the
+/// calibration it starts from may be off by a pixel on each camera.
+pub const RIG_ESTIMATION_TOLERANCE_PX: f32 = 3.0;
+/// Standard deviation of a calibrated principal point, pixels (self-calibration prior).
+pub const CALIBRATION_PP_PX: f64 = 2.0;
+/// Relative standard deviation of a calibrated focal length (self-calibration prior).
+pub const CALIBRATION_FOCAL: f64 = 0.01;
+/// The left (reference) camera's calibration sigmas are these times the right one's:
+/// its interior is held at the calibration (see `TraverseConfig::interior_sigmas`).
+pub const REFERENCE_CAMERA_FACTOR: f64 = 0.01;
 
 /// Everything the traverse needs before the first frame: the rig, the datum, the
 /// stages' configurations and capacities.
@@ -299,6 +311,58 @@ pub const SEED2014_DATUM_SIGMA: f64 = 1e-3;
 pub const SEED2014_BASE_SIGMA_M: f64 = 1e-3;
 
 impl TraverseConfig {
+    /// Switches the estimation of the rig's relative orientation in the adjustment.
+    ///
+    /// Estimating the rig needs the vertical parallax the images really show: with
+    /// a rectified calibration the matcher would put each right point on its left
+    /// point's row (`rows_only`) and the rig's omega and kappa would only see the
+    /// calibration back. So the stereo search goes through the general rig geometry
+    /// (epipolar band of `RIG_ESTIMATION_TOLERANCE_PX`, wide enough for a pixel of
+    /// principal-point error on each camera) and the refinement searches both axes.
+    pub fn with_rig_estimation(mut self, on: bool) -> Self {
+        self.adjust.estimate_rig = on;
+        self.adjust.self_calibration = on.then(|| self.interior_sigmas());
+        if on {
+            self.matching.stereo = StereoGeometry::Rig {
+                rig: self.rig,
+                tolerance_px: RIG_ESTIMATION_TOLERANCE_PX,
+                min_depth_m: 1.0,
+                max_depth_m: f64::INFINITY,
+            };
+            if let Some(r) = &mut self.matching.refine {
+                r.rows_only = false;
+            }
+        }
+        self
+    }
+
+    /// Calibration sigmas of the self-calibration that goes with the rig estimation:
+    /// [`CALIBRATION_PP_PX`] pixels for the principal points, [`CALIBRATION_FOCAL`] of the
+    /// focal lengths; the left camera's times [`REFERENCE_CAMERA_FACTOR`].
+    ///
+    /// Why the left camera is held: it is the reference of the traverse. Its principal
+    /// point trades against the attitude of every epoch (only the datum's fixed first
+    /// attitude tells them apart) and its focal length, with the right one, is the
+    /// common image scale, which a forward-moving rig hardly sees: left free, both
+    /// wander within their prior (1.4 % on `curves`) and the drift follows. What the
+    /// stereo geometry does determine is the right camera against the left one: its
+    /// focal length through the vertical parallax growing with the row, its principal
+    /// point (with the rig's angles) through the parallax offsets.
+    fn interior_sigmas(&self) -> InteriorSigmas {
+        let (l, r) = (&self.rig.left, &self.rig.right);
+        let k = REFERENCE_CAMERA_FACTOR;
+        InteriorSigmas {
+            principal_point_mm: [
+                k * CALIBRATION_PP_PX * l.pixel_size_mm[0],
+                CALIBRATION_PP_PX * r.pixel_size_mm[0],
+            ],
+            focal_mm: [
+                k * CALIBRATION_FOCAL * l.focal_mm,
+                CALIBRATION_FOCAL * r.focal_mm,
+            ],
+        }
+    }
+
     /// The settings of `mode` applied to this configuration (capacities untouched
     /// except the window length and the track history that follows it).
     ///

@@ -250,6 +250,13 @@ impl<'a> Traverse<'a> {
         (self.window.rig(), self.window.rig_std())
     }
 
+    /// The interior orientation corrections of the self-calibration `[x0_L, y0_L, f_L,
+    /// x0_R, y0_R, f_R]` (mm, added to the calibration) and their standard deviations;
+    /// zero when the interior is fixed.
+    pub fn interior_estimate(&self) -> (crate::adjust::InteriorCorrections, [f64; 6]) {
+        (self.window.interior(), self.window.interior_std())
+    }
+
     /// Right camera pose for a left pose, with the rig as last adjusted.
     fn right_of(&self, left: &Pose) -> Pose {
         camera_pose(left, &self.window.rig(), Camera::Right)
@@ -414,12 +421,14 @@ impl<'a> Traverse<'a> {
             _ => None,
         };
         let images = Some((*left, *right));
-        self.matcher.process_epoch(
-            cur,
-            prev,
-            images,
-            motion.as_ref().map(|m| (&self.cfg.rig, m)),
-        )
+        // Predict the right positions with the rig as last adjusted (the calibration
+        // when it is not estimated).
+        let mut rig = self.cfg.rig;
+        let r = self.window.rig();
+        rig.relative_angles = r.angles;
+        rig.base_m = r.base;
+        self.matcher
+            .process_epoch(cur, prev, images, motion.as_ref().map(|m| (&rig, m)))
     }
 
     /// Moves each tie point's current left position onto the spot its previous left
