@@ -26,6 +26,7 @@ import time
 import cv2
 import numpy as np
 
+STEREO_PAIR = "motorcycle/stereo"
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 W, H = 640, 480
 
@@ -144,11 +145,14 @@ def run_ours(binary, img, repeat, cap, tmp, extra=()):
 
 
 def opencv_bytes_per_pixel(img):
-    """Peak RSS of OpenCV's SIFT on the image minus that on a 32x32 image, each in a fresh
-    process, per pixel (the import and the interpreter cancel out)."""
-    code = ("import cv2,resource,sys,numpy as np;cv2.setNumThreads(1);"
-            "img=np.load(sys.argv[1]);s=cv2.SIFT_create();s.detectAndCompute(img,None);"
-            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
+    """Peak RSS growth of OpenCV's SIFT on the image, per pixel, in a fresh process: the peak
+    (VmHWM) is reset after the import (Linux: `5` into /proc/self/clear_refs), so the import's
+    own peak does not hide the extractor's; the same on a 32x32 image is subtracted."""
+    code = ("import cv2,sys,numpy as np;cv2.setNumThreads(1);"
+            "img=np.load(sys.argv[1]);s=cv2.SIFT_create();"
+            "kb=lambda k:int([l for l in open('/proc/self/status') if l.startswith(k)][0].split()[1]);"
+            "rss=kb('VmRSS:');open('/proc/self/clear_refs','w').write('5');"
+            "s.detectAndCompute(img,None);print(kb('VmHWM:')-rss)")
 
     def peak(a):
         with tempfile.TemporaryDirectory() as d:
@@ -334,7 +338,7 @@ def main():
     left = cv2.imread(os.path.join(sd, "motorcycle_left.png"), cv2.IMREAD_GRAYSCALE)
     right = cv2.imread(os.path.join(sd, "motorcycle_right.png"), cv2.IMREAD_GRAYSCALE)
     if not args.quick and left is not None and right is not None and os.path.exists(os.path.join(sd, "motorcycle_disp.pfm")):
-        pairs.append(("motorcycle/stereo", left, right, Disparity(read_pfm(os.path.join(sd, "motorcycle_disp.pfm")))))
+        pairs.append((STEREO_PAIR, left, right, Disparity(read_pfm(os.path.join(sd, "motorcycle_disp.pfm")))))
 
     rows = []
     cache = {}
@@ -379,8 +383,9 @@ def print_row(r):
 
 
 def summarise(rows, mem_cv):
-    warp = [r for r in rows if not r["pair"].startswith("motorcycle")]
-    moto = [r for r in rows if r["pair"].startswith("motorcycle")]
+    # The stereo pair, not the warps of the motorcycle_left base image.
+    moto = [r for r in rows if r["pair"] == STEREO_PAIR]
+    warp = [r for r in rows if r["pair"] != STEREO_PAIR]
 
     def agg(rs, who):
         m = sum(r[who]["matches"] for r in rs)
