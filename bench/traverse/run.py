@@ -131,6 +131,22 @@ def cpu_split(binary, ds, runs, frames, traverse_cpu):
             "match_adjust_rest": traverse_cpu - cpu["sift"]}
 
 
+def common_fields(ev, epochs, cpu_s, wall_s):
+    """The figures both sides report alike: drift from `phototraverse eval`, process time,
+    flagged (ours) or lost (peer) epochs, keypoints and stereo matches per epoch."""
+    return {
+        "translation_pct": ev["translation_drift_pct"],
+        "rotation_deg_per_m": ev["rotation_drift_deg_per_m"],
+        "ate_m": ev["ate_rmse_m"],
+        "final_pct": ev["final_position_error_pct"],
+        "process_cpu_ms_per_epoch": cpu_s * 1e3 / len(epochs),
+        "process_wall_s": wall_s,
+        "flagged": sum(e["status"] != "ok" for e in epochs),
+        "keypoints": median(sum(e["keypoints"]) / 2 for e in epochs),
+        "stereo_matches": median(e["stereo_matches"] for e in epochs),
+    }
+
+
 def run_scene(binary, cache, scene, frames, split=False):
     ds, synth_wall = synthesize(binary, cache, DATASET_OF.get(scene, scene), frames)
     runs = os.path.join(cache, "runs", f"{scene}-{frames}")
@@ -172,35 +188,19 @@ def run_scene(binary, cache, scene, frames, split=False):
         "dataset": ds,
         "path_length_m": ours_eval.get("path_length_m"),
         "ours": {
-            "translation_pct": ours_eval["translation_drift_pct"],
-            "rotation_deg_per_m": ours_eval["rotation_drift_deg_per_m"],
-            "ate_m": ours_eval["ate_rmse_m"],
-            "final_pct": ours_eval["final_position_error_pct"],
+            **common_fields(ours_eval, oe, ours_cpu, ours_wall),
             "ms": median(e["stage_ms"].get("total") for e in o_t),
             "stage_ms": {s: median(e["stage_ms"].get(s) for e in o_t) for s in OUR_STAGES},
-            "process_cpu_ms_per_epoch": ours_cpu * 1e3 / len(oe),
-            "process_wall_s": ours_wall,
-            "flagged": sum(e["status"] != "ok" for e in oe),
-            "keypoints": median(sum(e["keypoints"]) / 2 for e in oe),
-            "stereo_matches": median(e["stereo_matches"] for e in oe),
             "tie_points": median(e["tie_points"] for e in oe[1:]),
             "observations": median(e["observations"] for e in oe[1:]),
             "steps": ours_steps,
         },
         "peer": {
-            "translation_pct": peer_eval["translation_drift_pct"],
-            "rotation_deg_per_m": peer_eval["rotation_drift_deg_per_m"],
-            "ate_m": peer_eval["ate_rmse_m"],
-            "final_pct": peer_eval["final_position_error_pct"],
+            **common_fields(peer_eval, pe, peer_cpu, peer_wall),
             "ms": median(e["stage_ms"]["total"] for e in p_t),
             "cpu_ms": median(e["stage_cpu_ms"]["total"] for e in p_t),
             "stage_ms": {s: median(e["stage_ms"].get(s) for e in p_t) for s in PEER_STAGES},
             "stage_cpu_ms": {s: median(e["stage_cpu_ms"].get(s) for e in p_t) for s in PEER_STAGES},
-            "process_cpu_ms_per_epoch": peer_cpu * 1e3 / len(pe),
-            "process_wall_s": peer_wall,
-            "flagged": sum(e["status"] != "ok" for e in pe),
-            "keypoints": median(sum(e["keypoints"]) / 2 for e in pe),
-            "stereo_matches": median(e["stereo_matches"] for e in pe),
             "temporal_matches": median(e.get("temporal_matches") for e in pe[1:]),
             "pnp_inliers": median(e.get("pnp_inliers") for e in pe[1:]),
             "pnp_inlier_quads": median(e.get("pnp_inlier_quads") for e in pe[1:]),

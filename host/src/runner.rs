@@ -22,9 +22,7 @@ use anyhow::{Context, Result};
 use phototraverse_core::adjust::quality::ChiSquareTest;
 use phototraverse_core::budget::{ComponentKind, MemoryBudget};
 use phototraverse_core::camera::{kitti_from_pose, pose_from_kitti, Pose, Rig};
-use phototraverse_core::protocol::messages::{
-    stage, status, ConfigAccepted, EpochResult, PixelFormat,
-};
+use phototraverse_core::protocol::messages::{stage, status, ConfigAccepted, EpochResult};
 use phototraverse_core::traverse::flags;
 use phototraverse_core::traverse::motion::constant_velocity;
 use phototraverse_firmware_sim::{configuration_budget, TraverseFactory};
@@ -186,16 +184,8 @@ impl<'d> Run<'d> {
         let time = self.time_of(i);
         let record = match self.ds.load_pair(i) {
             Ok((left, right)) => {
-                let frames = EpochFrames {
-                    epoch: i as u32,
-                    timestamp_us: (time * 1e6).max(0.0) as u64,
-                    width: left.width as u16,
-                    height: left.height as u16,
-                    format: PixelFormat::Gray8,
-                    left: &left.data,
-                    right: &right.data,
-                    aux: None,
-                };
+                let timestamp_us = (time * 1e6).max(0.0) as u64;
+                let frames = EpochFrames::gray8(i as u32, timestamp_us, &left, &right);
                 session.send_epoch(&frames)?;
                 let e = i as u32;
                 // Statistics follow the result of every epoch the firmware processed.

@@ -67,6 +67,27 @@ pub struct EpochFrames<'a> {
     pub aux: Option<Aux>,
 }
 
+impl<'a> EpochFrames<'a> {
+    /// A stereo pair of 8-bit images (the datasets' format), without auxiliary data.
+    pub fn gray8(
+        epoch: u32,
+        timestamp_us: u64,
+        left: &'a crate::dataset::GrayImage,
+        right: &'a crate::dataset::GrayImage,
+    ) -> Self {
+        EpochFrames {
+            epoch,
+            timestamp_us,
+            width: left.width as u16,
+            height: left.height as u16,
+            format: PixelFormat::Gray8,
+            left: &left.data,
+            right: &right.data,
+            aux: None,
+        }
+    }
+}
+
 /// An Error message from the firmware (or a host-side link error), owned.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct FirmwareError {

@@ -362,7 +362,7 @@ fn a_firmware_that_dies_keeps_the_poses_processed() {
 /// result of epoch e + 7), the rest at the flush.
 #[test]
 fn the_firmware_reports_each_record_once() {
-    use phototraverse_core::protocol::messages::{points_flags, PixelFormat};
+    use phototraverse_core::protocol::messages::points_flags;
     use phototraverse_host::link::LinkOptions;
     use phototraverse_host::pipeline::PipelineSettings;
     use phototraverse_host::session::{connect, EpochFrames};
@@ -387,17 +387,9 @@ fn the_firmware_reports_each_record_once() {
     };
     for i in 0..ds.len() {
         let (l, r) = ds.load_pair(i).unwrap();
-        s.send_epoch(&EpochFrames {
-            epoch: i as u32,
-            timestamp_us: (ds.epochs[i].time.unwrap() * 1e6) as u64,
-            width: l.width as u16,
-            height: l.height as u16,
-            format: PixelFormat::Gray8,
-            left: &l.data,
-            right: &r.data,
-            aux: None,
-        })
-        .unwrap();
+        let timestamp_us = (ds.epochs[i].time.unwrap() * 1e6) as u64;
+        s.send_epoch(&EpochFrames::gray8(i as u32, timestamp_us, &l, &r))
+            .unwrap();
         s.finish().unwrap();
         let msgs = s.pull_points(false).unwrap();
         assert!(msgs.iter().all(|m| m.flags & points_flags::FLUSH == 0));

@@ -1159,12 +1159,7 @@ fn perturbed_rig_is_recovered_and_survives_slides() {
         max_points: 500,
         max_observations: s.obs.len(),
         estimate_rig: true,
-        sigmas: ConstraintSigmas {
-            rig_angle_rad: 0.01,
-            rig_base_m: 0.01,
-            base_length_m: 1e-4,
-            ..ConstraintSigmas::default()
-        },
+        sigmas: loose_rig_prior(),
         ..AdjustConfig::default()
     };
     let mut mem = arena_for(&cfg);
@@ -1237,6 +1232,16 @@ fn perturbed_rig_is_recovered_and_survives_slides() {
     }
 }
 
+/// A loose prior on the rig (10 mrad, 1 cm) with the base length held (0.1 mm).
+fn loose_rig_prior() -> ConstraintSigmas {
+    ConstraintSigmas {
+        rig_angle_rad: 0.01,
+        rig_base_m: 0.01,
+        base_length_m: 1e-4,
+        ..ConstraintSigmas::default()
+    }
+}
+
 /// A window over the whole scene (`Robust::None`, loose rig prior, base length held),
 /// solved; `right` maps each right observation (a calibration error of that camera).
 fn solve_with_right_error(
@@ -1253,12 +1258,7 @@ fn solve_with_right_error(
         estimate_rig,
         self_calibration,
         robust: Robust::None,
-        sigmas: ConstraintSigmas {
-            rig_angle_rad: 0.01,
-            rig_base_m: 0.01,
-            base_length_m: 1e-4,
-            ..ConstraintSigmas::default()
-        },
+        sigmas: loose_rig_prior(),
         ..AdjustConfig::default()
     };
     let mut mem = arena_for(&cfg);

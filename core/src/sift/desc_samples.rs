@@ -33,7 +33,7 @@ pub struct Frame {
 
 /// One grid row of samples. A sample outside the image or the bins has `ok == 0` and,
 /// after the gradient pass, zero weight (so zero magnitude: the scatter skips it).
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, bytemuck::Zeroable)]
 pub struct RowSamples {
     pub pc: [i32; DESC_GRID],
     pub pr: [i32; DESC_GRID],
@@ -57,25 +57,7 @@ pub struct RowSamples {
 
 impl Default for RowSamples {
     fn default() -> Self {
-        let (zi, zf) = ([0i32; DESC_GRID], [0f32; DESC_GRID]);
-        RowSamples {
-            pc: zi,
-            pr: zi,
-            ok: zi,
-            rbin: zf,
-            cbin: zf,
-            dx: zf,
-            dy: zf,
-            wgt: zf,
-            mag: zf,
-            obin: zf,
-            o0: zi,
-            r0: zi,
-            c0: zi,
-            fo: zf,
-            fr: zf,
-            fc: zf,
-        }
+        bytemuck::Zeroable::zeroed()
     }
 }
 

@@ -123,7 +123,7 @@ pub fn orientations(
 const WINDOW: usize = 2 * MAX_RADIUS + 2;
 
 /// Gradients of one window row and their votes: weighted magnitude and histogram bin.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, bytemuck::Zeroable)]
 struct WindowRow {
     dx: [f32; WINDOW],
     dy: [f32; WINDOW],
@@ -134,13 +134,7 @@ struct WindowRow {
 
 impl Default for WindowRow {
     fn default() -> Self {
-        WindowRow {
-            dx: [0.0; WINDOW],
-            dy: [0.0; WINDOW],
-            wgt: [0.0; WINDOW],
-            vote: [0.0; WINDOW],
-            bin: [0; WINDOW],
-        }
+        bytemuck::Zeroable::zeroed()
     }
 }
 
