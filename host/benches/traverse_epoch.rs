@@ -33,7 +33,7 @@ impl Clock for ThreadClock {
 }
 
 const KEYS: &str = "keypoints contrast window sigma_px max_iterations tolerance \
-                    robust_rounds ratio tie_points keep_exclusions fine_octave levels edge velocity_sigma robust max_depth min_ray_angle_deg refine temporal_refine min_ncc back_check";
+                    robust_rounds ratio tie_points keep_exclusions fine_octave levels edge velocity_sigma robust max_depth min_ray_angle_deg refine temporal_refine min_ncc back_check area step_angle step_position";
 
 fn apply(cfg: &mut TraverseConfig, key: &str, value: &str) -> Result<(), String> {
     let f = || {
@@ -55,6 +55,8 @@ fn apply(cfg: &mut TraverseConfig, key: &str, value: &str) -> Result<(), String>
         "sigma_px" => cfg.sigma_px = f()?,
         "max_iterations" => cfg.adjust.max_iterations = f()? as usize,
         "tolerance" => cfg.adjust.tolerance = f()?,
+        "step_angle" => cfg.adjust.step_tolerance[0] = f()?,
+        "step_position" => cfg.adjust.step_tolerance[1] = f()?,
         "robust_rounds" => cfg.adjust.max_robust_rounds = f()? as usize,
         "ratio" => cfg.matching.ratio = f()? as f32,
         "tie_points" => cfg.matching.max_tie_points = f()? as usize,
@@ -82,6 +84,10 @@ fn apply(cfg: &mut TraverseConfig, key: &str, value: &str) -> Result<(), String>
                 })
         }
         "temporal_refine" => cfg.temporal_refine = f()? != 0.0,
+        "area" => {
+            cfg.max_area_ties = f()? as usize;
+            cfg.fit_capacities();
+        }
         "min_ncc" => {
             if let Some(r) = cfg.matching.refine.as_mut() {
                 r.min_ncc = f()? as f32;
@@ -169,6 +175,49 @@ fn main() -> Result<(), String> {
         ];
         for (s, v) in stages.iter_mut().zip(us) {
             s.push(v as f64 / 1000.0);
+        }
+        if std::env::var_os("PT_RESID_DEBUG").is_some() && i % 10 == 9 {
+            // mean residual per camera and axis, and per image quadrant (left camera)
+            let mut acc = [[0f64; 3]; 6];
+            for j in 0..trav.window_observation_count() {
+                let (Some(o), Some((px, Some(r)))) = (
+                    trav.window_observation(j),
+                    trav.window_observation_pixels(j),
+                ) else {
+                    continue;
+                };
+                if o.flagged {
+                    continue;
+                }
+                let c = o.camera as usize;
+                acc[c][0] += r[0];
+                acc[c][1] += r[1];
+                acc[c][2] += 1.0;
+                if c == 0 {
+                    let q = 2 + (px[0] > 320.0) as usize + 2 * (px[1] > 240.0) as usize;
+                    acc[q][0] += r[0];
+                    acc[q][1] += r[1];
+                    acc[q][2] += 1.0;
+                }
+            }
+            let m: Vec<String> = acc
+                .iter()
+                .map(|a| {
+                    format!(
+                        "({:+.3},{:+.3} n{})",
+                        a[0] / a[2].max(1.0),
+                        a[1] / a[2].max(1.0),
+                        a[2]
+                    )
+                })
+                .collect();
+            eprintln!(
+                "{i}: L {} R {} | TL {} TR {} BL {} BR {}",
+                m[0], m[1], m[2], m[3], m[4], m[5]
+            );
+        }
+        if std::env::var_os("PT_MATCH_DEBUG").is_some() {
+            eprintln!("{i}: {:?}", trav.match_report());
         }
         ties.push(out.tie_points as f64);
         iters.push(out.iterations as f64);

@@ -67,7 +67,7 @@ impl DatumSettings {
 /// edge_ratio = 10.0            # principal curvature ratio
 /// match_ratio = 0.8            # Lowe's ratio
 /// max_disparity_px = 320.0     # rectified rigs: disparity search range
-/// window = 8                   # epochs in the adjustment window
+/// window = 3                   # epochs in the adjustment window
 /// track_capacity = 600         # tracks kept at once
 /// mode = "window"              # window, seed2014, seed2006
 /// estimate_rig = false         # estimate the relative orientation
@@ -107,7 +107,7 @@ impl Default for PipelineSettings {
             edge_ratio: 10.0,
             match_ratio: 0.8,
             max_disparity_px: None,
-            window: 8,
+            window: 3,
             track_capacity: 600,
             mode: Mode::Window,
             estimate_rig: false,

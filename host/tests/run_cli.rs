@@ -359,7 +359,7 @@ fn a_firmware_that_dies_keeps_the_poses_processed() {
 
 /// On the wire, each observation and each point is reported exactly once: the
 /// observations of epoch e when it is the oldest of a full window (after the
-/// result of epoch e + 7), the rest at the flush.
+/// result of epoch e + window - 1), the rest at the flush.
 #[test]
 fn the_firmware_reports_each_record_once() {
     use phototraverse_core::protocol::messages::points_flags;
@@ -370,8 +370,9 @@ fn the_firmware_reports_each_record_once() {
 
     let ds = Dataset::open(sequence()).unwrap();
     let mut s = connect(&LinkOptions::default()).unwrap();
-    s.configure(&PipelineSettings::default().configure(&ds.rig))
-        .unwrap();
+    let settings = PipelineSettings::default();
+    let last = settings.window as usize - 1;
+    s.configure(&settings.configure(&ds.rig)).unwrap();
     let (mut obs, mut points) = (BTreeSet::new(), BTreeSet::new());
     let mut absorb = |msgs: &[phototraverse_core::protocol::messages::Points],
                       epochs: &mut BTreeSet<u32>| {
@@ -395,14 +396,14 @@ fn the_firmware_reports_each_record_once() {
         assert!(msgs.iter().all(|m| m.flags & points_flags::FLUSH == 0));
         let mut epochs = BTreeSet::new();
         absorb(&msgs, &mut epochs);
-        // Window of 8: after epoch i >= 7, epoch i - 7 leaves next.
-        let expected: BTreeSet<u32> = (i >= 7).then(|| (i - 7) as u32).into_iter().collect();
+        // After epoch i >= window - 1, epoch i - (window - 1) leaves next.
+        let expected: BTreeSet<u32> = (i >= last).then(|| (i - last) as u32).into_iter().collect();
         assert_eq!(epochs, expected, "after epoch {i}");
     }
     let msgs = s.pull_points(true).unwrap();
     let mut epochs = BTreeSet::new();
     absorb(&msgs, &mut epochs);
-    assert_eq!(epochs, (FRAMES as u32 - 7..FRAMES as u32).collect());
+    assert_eq!(epochs, ((FRAMES - last) as u32..FRAMES as u32).collect());
     // A second flush finds nothing left.
     let again = s.pull_points(true).unwrap();
     assert_eq!(again.len(), 1);

@@ -91,6 +91,7 @@ pub type InteriorCorrections = [f64; 6];
 /// Applies interior `corrections` to `pr`, a projection into `camera` computed with the
 /// corrected focal length `focal_mm` (calibrated plus `corrections`): adds the principal
 /// point shift and fills `d_interior` (`d xc / d f = xc / f` before the shift).
+#[inline]
 pub fn with_interior(
     mut pr: RigProjection,
     camera: Camera,
@@ -163,6 +164,7 @@ impl Rotations {
 
 /// Only the photo-coordinates (no Jacobians) with precomputed rotations;
 /// `None` behind the camera.
+#[inline]
 pub fn project_xy(
     left: &Rotations,
     centre: &[f64; 3],
@@ -185,6 +187,7 @@ pub fn project_xy(
 }
 
 /// [`project_rig`] with precomputed rotations of the left camera and the rig.
+#[inline]
 pub fn project_with(
     left: &Rotations,
     centre: &[f64; 3],

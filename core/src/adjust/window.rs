@@ -129,6 +129,16 @@ impl Robust {
     }
 }
 
+/// Which camera blocks a point's pass accumulates besides its own `V` and `b`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum CamBlocks {
+    None,
+    /// The cross blocks `W` only (back-substitution, point covariances).
+    Cross,
+    /// `W`, the camera blocks `U` and gradients `g` (the reduced system).
+    Full,
+}
+
 /// Configuration of the adjustment: capacities, iterations, constraints.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AdjustConfig {
@@ -150,6 +160,11 @@ pub struct AdjustConfig {
     pub robust: Robust,
     /// Convergence: relative decrease of `vTPv` below this stops the iterations.
     pub tolerance: f64,
+    /// Convergence on the step: a Gauss-Newton step that moves no camera angle by more
+    /// than `[0]` (rad) and no camera centre by more than `[1]` (m) ends the iterations
+    /// without another one to confirm it (the linearisation error left after a step
+    /// is of the order of its square). Zero turns it off.
+    pub step_tolerance: [f64; 2],
     /// Sliding-window mode of [`Robust::Snooping`]: exclusions found by earlier solves
     /// stay as the starting set (snooping may readmit them) and the Cauchy rounds are
     /// skipped, so an epoch only pays for the blunders its own observations bring.
@@ -169,6 +184,7 @@ impl Default for AdjustConfig {
             sigmas: ConstraintSigmas::default(),
             robust: Robust::snooping(),
             tolerance: 1e-12,
+            step_tolerance: [0.0; 2],
             keep_exclusions: false,
         }
     }
@@ -1156,16 +1172,23 @@ impl<'a> Window<'a> {
     /// (`rig`/`scratch` filled for the touched camera blocks). Returns `None`
     /// when the point has no usable observation.
     fn point_blocks(&mut self, p: usize, want_cam: bool) -> (PointBlocks, f64, usize) {
-        self.point_blocks_with(p, want_cam, false)
+        let cams = if want_cam {
+            CamBlocks::Full
+        } else {
+            CamBlocks::None
+        };
+        self.point_blocks_with(p, cams, false)
     }
 
-    /// [`Self::point_blocks`]; with `all` every observation counts with factor 1.
+    /// [`Self::point_blocks`]; `cams` says which camera blocks to accumulate; with
+    /// `all` every observation counts with factor 1.
     fn point_blocks_with(
         &mut self,
         p: usize,
-        want_cam: bool,
+        cams: CamBlocks,
         all: bool,
     ) -> (PointBlocks, f64, usize) {
+        let (want_cam, full) = (cams != CamBlocks::None, cams == CamBlocks::Full);
         let mut v = Matrix3::<f64>::zeros();
         let mut b = Vector3::<f64>::zeros();
         let mut cost = 0.0;
@@ -1241,12 +1264,15 @@ impl<'a> Window<'a> {
                 for c in 0..2 {
                     for i in 0..6 {
                         let wi = wt[c] * jc[c][i];
+                        for j in 0..3 {
+                            sc.w[i * 3 + j] += wi * pr.d_point[c][j];
+                        }
+                        if !full {
+                            continue;
+                        }
                         sc.g[i] += wi * r[c];
                         for j in 0..6 {
                             sc.u[i * 6 + j] += wi * jc[c][j];
-                        }
-                        for j in 0..3 {
-                            sc.w[i * 3 + j] += wi * pr.d_point[c][j];
                         }
                         // Cross blocks with the later blocks: epoch x rig, epoch x
                         // interior, rig x interior (J_this^T W J_other).
@@ -1396,7 +1422,8 @@ impl<'a> Window<'a> {
             if self.points[p].flags & (PT_USED | PT_EXCLUDED) != PT_USED {
                 continue;
             }
-            let (pb, _, _) = self.point_blocks(p, true);
+            // The point's step needs only its own blocks and the cross blocks W.
+            let (pb, _, _) = self.point_blocks_with(p, CamBlocks::Cross, false);
             let Some(vinv) = self.usable_point(p, &pb, lambda) else {
                 continue;
             };
@@ -1718,12 +1745,13 @@ impl<'a> Window<'a> {
                     continue;
                 }
             }
+            let small_step = self.step_is_small();
             let (new_cost, _) = self.cost();
             if new_cost.is_finite() && new_cost <= cost {
                 let decrease = cost - new_cost;
                 cost = new_cost;
                 lambda = (lambda * 0.1).max(1e-12);
-                if decrease <= self.cfg.tolerance * cost.max(1e-300) {
+                if small_step || decrease <= self.cfg.tolerance * cost.max(1e-300) {
                     converged = true;
                     break;
                 }
@@ -1742,6 +1770,17 @@ impl<'a> Window<'a> {
             }
         }
         Ok((iterations, converged))
+    }
+
+    /// Whether the last step (camera part in `rhs`) is below `step_tolerance`.
+    fn step_is_small(&self) -> bool {
+        let [ta, tp] = self.cfg.step_tolerance;
+        if !(ta > 0.0 && tp > 0.0) {
+            return false;
+        }
+        self.rhs[..6 * self.n_epochs]
+            .chunks_exact(6)
+            .all(|d| d[..3].iter().all(|a| a.abs() <= ta) && d[3..].iter().all(|p| p.abs() <= tp))
     }
 
     /// Adjusts the window: least squares with the robust treatment of the
@@ -1949,7 +1988,7 @@ impl<'a> Window<'a> {
             // its observations were in, so a wrongly excluded point can return.
             let all = vinv.is_none();
             if all {
-                let (pb, _, _) = self.point_blocks_with(p, false, true);
+                let (pb, _, _) = self.point_blocks_with(p, CamBlocks::None, true);
                 vinv = if pb.used >= 2 {
                     sym3_inverse(&pb.v)
                 } else {
@@ -2132,7 +2171,7 @@ impl<'a> Window<'a> {
             if self.points[p].flags & (PT_USED | PT_EXCLUDED) != PT_USED {
                 continue;
             }
-            let (pb, _, _) = self.point_blocks(p, true);
+            let (pb, _, _) = self.point_blocks_with(p, CamBlocks::Cross, false);
             let Some(vinv) = sym3_inverse(&pb.v) else {
                 continue;
             };

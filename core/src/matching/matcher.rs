@@ -700,6 +700,11 @@ impl<'a> Matcher<'a> {
         self.tracks.set_positions(slot, self.epoch, left, right)
     }
 
+    /// A fresh tie point identity (see [`Tracks::allocate_id`]).
+    pub fn new_track_id(&mut self) -> u32 {
+        self.tracks.allocate_id()
+    }
+
     /// The quads of the last accepted epoch (keypoint indices of the four images).
     pub fn quads(&self) -> &[Quad] {
         &self.quads[..self.n_tie]

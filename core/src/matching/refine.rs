@@ -54,6 +54,8 @@ pub fn refine_checked(
 
 const T: usize = 2 * MAX_REFINE_HALF + 1;
 const S: usize = 2 * MAX_REFINE_RADIUS + 1;
+/// Side of the largest sampled search region (template plus search on both sides).
+const R: usize = T + 2 * MAX_REFINE_RADIUS;
 
 /// Bilinear sample at (x, y); the caller guarantees `0 <= x < w - 1`, `0 <= y < h - 1`.
 #[inline]
@@ -65,6 +67,27 @@ fn bilinear(img: &ImageView<'_>, x: f32, y: f32) -> f32 {
     let top = r0[c] as f32 * (1.0 - fx) + r0[c + 1] as f32 * fx;
     let bot = r1[c] as f32 * (1.0 - fx) + r1[c + 1] as f32 * fx;
     top * (1.0 - fy) + bot * fy
+}
+
+/// Bilinear samples of the `w x h` grid at `origin + (u, v)` into `out` (row stride
+/// [`R`]); the caller guarantees the grid lies inside the image with a pixel to spare.
+fn sample_region(
+    img: &ImageView<'_>,
+    origin: [f32; 2],
+    (w, h): (usize, usize),
+    out: &mut [f32; R * R],
+) {
+    let (c0, r0) = (origin[0] as usize, origin[1] as usize);
+    let (fx, fy) = (origin[0] - c0 as f32, origin[1] - r0 as f32);
+    for v in 0..h {
+        let (top, bot) = (img.row(r0 + v), img.row(r0 + v + 1));
+        let (top, bot) = (&top[c0..c0 + w + 1], &bot[c0..c0 + w + 1]);
+        for u in 0..w {
+            let t = top[u] as f32 * (1.0 - fx) + top[u + 1] as f32 * fx;
+            let b = bot[u] as f32 * (1.0 - fx) + bot[u + 1] as f32 * fx;
+            out[v * R + u] = t * (1.0 - fy) + b * fy;
+        }
+    }
 }
 
 fn inside(img: &ImageView<'_>, x: f32, y: f32, margin: f32) -> bool {
@@ -160,19 +183,27 @@ pub fn correlate(
     if tnorm < 1e-3 * cnt {
         return Err(RefineError::Flat);
     }
+    // Every position of the search shares the fractional part of `centre`: sample the
+    // region once (bilinear) and slide the template over it by whole pixels.
+    let (rw, rh) = (n + 2 * rx, n + 2 * ry);
+    let mut region = [0f32; R * R];
+    sample_region(
+        img,
+        [centre[0] - rx as f32 - hf, centre[1] - ry as f32 - hf],
+        (rw, rh),
+        &mut region,
+    );
     let mut score = [f32::MIN; S * S];
     let mut best = (0usize, 0usize, f32::MIN);
     for oy in 0..=2 * ry {
         for ox in 0..=2 * rx {
-            let cx = centre[0] + ox as f32 - rx as f32 - hf;
-            let cy = centre[1] + oy as f32 - ry as f32 - hf;
             let (mut sum, mut sum2, mut cross) = (0f32, 0f32, 0f32);
             for v in 0..n {
-                for u in 0..n {
-                    let s = bilinear(img, cx + u as f32, cy + v as f32);
+                let row = &region[(oy + v) * R + ox..(oy + v) * R + ox + n];
+                for (&s, &z) in row.iter().zip(&zt[v * n..(v + 1) * n]) {
                     sum += s;
                     sum2 += s * s;
-                    cross += s * zt[v * n + u];
+                    cross += s * z;
                 }
             }
             let var = sum2 - sum * sum / cnt;

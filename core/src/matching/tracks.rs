@@ -202,6 +202,14 @@ impl<'a> Tracks<'a> {
         stats
     }
 
+    /// A fresh identity for a tie point followed outside the table (by area matching),
+    /// so every tie point of the traverse keeps a distinct id.
+    pub fn allocate_id(&mut self) -> u32 {
+        let id = self.next_id;
+        self.next_id = self.next_id.wrapping_add(1) % NONE;
+        id
+    }
+
     /// Ends every track (for example after a frame from another place broke the chain).
     pub fn clear(&mut self) {
         for t in self.slots.iter_mut().filter(|t| t.is_live()) {

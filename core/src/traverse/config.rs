@@ -8,6 +8,7 @@ use crate::features::FeatureSet;
 use crate::matching::{MatchConfig, RefineConfig, StereoGeometry};
 use crate::sift::SiftConfig;
 
+use super::area::AreaTie;
 use super::patches::Patches;
 use super::{Refined, TrackPoint};
 
@@ -54,6 +55,10 @@ pub struct TraverseConfig {
     /// Refine each tie point's current left position against the previous epoch's
     /// template (needs `matching.refine`; see `traverse::patches`).
     pub temporal_refine: bool,
+    /// Most tie points per epoch found by area matching: the previous epoch's stereo
+    /// points that no descriptor quad continued, looked for around their predicted
+    /// positions (needs `temporal_refine`; see `traverse::area`); 0 turns it off.
+    pub max_area_ties: usize,
 }
 
 impl TraverseConfig {
@@ -89,7 +94,10 @@ impl TraverseConfig {
         });
         matching.max_tie_points = MAX_TIE_POINTS;
         matching.max_tracks = 600;
-        let window = 8;
+        // Three epochs: with the tie points carried on by area matching, longer windows
+        // cost in proportion and gave no better drift on the rendered streets
+        // (docs/configuration.md, "Window length").
+        let window = 3;
         matching.track_history = window;
         let adjust = AdjustConfig {
             window,
@@ -107,6 +115,9 @@ impl TraverseConfig {
             // Each epoch starts from the last solution: a relative decrease of 1e-6
             // moves the poses by far less than their sigma.
             tolerance: 1e-6,
+            // A step below 0.1 mrad and 1 mm leaves a linearisation error of the order
+            // of 1e-8: no confirming iteration is needed.
+            step_tolerance: [1e-4, 1e-3],
             keep_exclusions: true,
             ..AdjustConfig::default()
         };
@@ -125,6 +136,7 @@ impl TraverseConfig {
             max_depth_m: 1000.0,
             prediction_sigmas: [0.01, 0.01, 0.01, 0.3, 0.3, 0.3],
             temporal_refine: true,
+            max_area_ties: usize::MAX,
         };
         cfg.fit_capacities();
         cfg
@@ -214,6 +226,11 @@ impl TraverseConfig {
                 ComponentKind::Working,
                 slice_bytes::<Refined>(self.matching.max_tie_points),
             );
+            budget.add(
+                "traverse.area_ties",
+                ComponentKind::Working,
+                slice_bytes::<AreaTie>(self.area_capacity()),
+            );
         }
         budget.add(
             "traverse.correspondences",
@@ -228,6 +245,15 @@ impl TraverseConfig {
         let r = self.matching.refine.as_ref()?;
         self.temporal_refine
             .then_some((self.matching.max_tie_points, r.half_window as usize))
+    }
+
+    /// Tie points found by area matching per epoch: at most one per template, none
+    /// when area tracking is off.
+    pub fn area_capacity(&self) -> usize {
+        match self.patch_capacity() {
+            Some((cap, _)) => cap.min(self.max_area_ties),
+            None => 0,
+        }
     }
 
     /// Total bytes of the budget (frames excluded).

@@ -16,6 +16,7 @@
 //! Memory: every buffer is carved from the arena at construction
 //! ([`TraverseConfig::budget`] predicts it); processing allocates nothing.
 
+mod area;
 pub mod config;
 pub mod motion;
 pub mod output;
@@ -41,9 +42,10 @@ use crate::matching::{
     TiePoint,
 };
 use crate::sift::{Sift, SiftError};
+use area::AreaTie;
 use bytemuck::{Pod, Zeroable};
 use motion::predict;
-use patches::Patches;
+use patches::{PatchInfo, Patches};
 
 /// Microsecond time source for the per-stage timings (the DWT cycle counter on a
 /// Cortex-M, `Instant` on the host). [`NoClock`] reports zeros.
@@ -156,6 +158,9 @@ pub struct Traverse<'a> {
     /// Templates of the last accepted epoch's left image (temporal refinement).
     patches: Option<Patches<'a>>,
     refined: &'a mut [Refined],
+    /// Tie points found by area matching at this epoch (`area`), the first `n_area`.
+    area: &'a mut [AreaTie],
+    n_area: usize,
     /// Input epoch index of each window slot (oldest first).
     window_inputs: &'a mut [u32],
     epochs: u32,
@@ -164,6 +169,8 @@ pub struct Traverse<'a> {
     history: [Option<Stamped>; 2],
     /// Window epoch id of the last accepted epoch.
     prev_window_epoch: Option<u32>,
+    /// The matcher's report of the last epoch (diagnostics).
+    last_match: crate::matching::EpochReport,
 }
 
 impl<'a> Traverse<'a> {
@@ -181,12 +188,13 @@ impl<'a> Traverse<'a> {
         window.set_base_length(cfg.rig.base_length());
         let track_points = arena.alloc_slice::<TrackPoint>(cfg.matching.max_tracks)?;
         track_points.fill(NO_POINT);
-        let (patches, refined) = match cfg.patch_capacity() {
+        let (patches, refined, area) = match cfg.patch_capacity() {
             Some((cap, half)) => (
                 Some(Patches::new(arena, cap, half)?),
                 arena.alloc_slice::<Refined>(cfg.matching.max_tie_points)?,
+                arena.alloc_slice::<AreaTie>(cfg.area_capacity())?,
             ),
-            None => (None, Default::default()),
+            None => (None, Default::default(), Default::default()),
         };
         let corr = arena.alloc_slice::<Correspondence>(cfg.matching.max_tie_points)?;
         let window_inputs = arena.alloc_slice::<u32>(cfg.adjust.window)?;
@@ -201,12 +209,20 @@ impl<'a> Traverse<'a> {
             corr,
             patches,
             refined,
+            area,
+            n_area: 0,
             window_inputs,
             epochs: 0,
             have_prev: false,
             history: [None, None],
             prev_window_epoch: None,
+            last_match: Default::default(),
         })
+    }
+
+    /// What the matcher did at the last epoch (counts per step, for diagnostics).
+    pub fn match_report(&self) -> &crate::matching::EpochReport {
+        &self.last_match
     }
 
     pub fn config(&self) -> &TraverseConfig {
@@ -314,8 +330,8 @@ impl<'a> Traverse<'a> {
         };
         if report.status != MatchStatus::RepeatedFrame {
             self.refine_temporal(left, right);
-            self.store_patches(fill, left);
         }
+        self.last_match = report;
         let t2 = clock.now_us();
         out.times.matching_us = elapsed(t1, t2);
         out.stereo_matches = report.stereo.pass.matches;
@@ -342,7 +358,15 @@ impl<'a> Traverse<'a> {
             _ => 0,
         };
 
-        let adjusted = self.adjust_epoch(k, (time_s, aux), &prediction, &mut out, clock, t2);
+        let before = self.prev_window_epoch;
+        let images = (left, right);
+        let adjusted =
+            self.adjust_epoch(k, (time_s, aux), &prediction, images, &mut out, clock, t2);
+        // The templates of this image serve the next epoch only if it is in the window.
+        let added = self
+            .prev_window_epoch
+            .filter(|_| self.prev_window_epoch != before);
+        self.store_patches(fill, left, added);
         out.settle(adjusted);
         self.history = [
             self.history[1],
@@ -465,30 +489,50 @@ impl<'a> Traverse<'a> {
     }
 
     /// Keeps the templates the next epoch's tie points will start from: the tie points'
-    /// current (refined) positions and the other stereo matches' left keypoints.
-    fn store_patches(&mut self, fill: usize, left: &ImageView) {
+    /// current (refined) positions, those found by area, and the other stereo matches'
+    /// left keypoints, in that order of priority; `epoch` is this image's window epoch.
+    fn store_patches(&mut self, fill: usize, left: &ImageView, epoch: Option<u32>) {
         let Some(patches) = &mut self.patches else {
             return;
         };
-        patches.clear();
+        patches.clear(epoch);
+        if epoch.is_none() {
+            return;
+        }
         for tie in self.matcher.tie_points() {
-            patches.push(left, tie.cur.left);
+            let info = match known_point(self.track_points, &tie) {
+                Some(point) => PatchInfo {
+                    right: tie.cur.right,
+                    tag: tie.track_id,
+                    point,
+                },
+                None => PatchInfo::stereo(tie.cur.right),
+            };
+            patches.push(left, tie.cur.left, info);
+        }
+        for a in self.area[..self.n_area]
+            .iter()
+            .filter(|a| a.point != patches::NO_ID)
+        {
+            patches.push(left, a.left, a.into());
         }
         let quads = self.matcher.quads();
         let kps = self.features[fill][0].keypoints();
         for m in self.matcher.stereo_matches(kps) {
             if !quads.iter().any(|q| q.cur_left == m.left) {
-                patches.push(left, m.left_px);
+                patches.push(left, m.left_px, PatchInfo::stereo(m.right_px));
             }
         }
     }
 
     /// Initial values, window update and adjustment; true when the epoch was adjusted.
+    #[allow(clippy::too_many_arguments)]
     fn adjust_epoch(
         &mut self,
         k: u32,
         (time_s, aux): (f64, AuxObservations),
         prediction: &Pose,
+        (left, right): (&ImageView, &ImageView),
         out: &mut EpochOutput,
         clock: &impl Clock,
         t_start: u64,
@@ -502,6 +546,11 @@ impl<'a> Traverse<'a> {
                 *prediction
             })
         };
+        let ta = clock.now_us();
+        self.track_by_area(left, right, &initial);
+        let area_us = elapsed(ta, clock.now_us());
+        out.times.matching_us = out.times.matching_us.saturating_add(area_us);
+        out.tie_points += self.n_area as u32;
         if self.window.n_epochs() >= self.cfg.adjust.window && self.slide().is_err() {
             out.flags |= flags::SOLVE_FAILED;
             return false;
@@ -527,7 +576,7 @@ impl<'a> Traverse<'a> {
         }
         out.new_points = self.add_tie_points(id);
         let t3 = clock.now_us();
-        out.times.initial_us = elapsed(t_start, t3);
+        out.times.initial_us = elapsed(t_start, t3).saturating_sub(area_us);
         out.left = initial;
         out.right = self.right_of(&initial);
         let adjusted = first || self.solve(id, prediction, out);
@@ -593,7 +642,9 @@ impl<'a> Traverse<'a> {
                 Some(p) => p,
                 None => {
                     let at = (prev_id, &prev);
-                    let Some(p) = new_point(&self.cfg, &mut self.window, at, &tie) else {
+                    let obs = (tie.prev.left, tie.prev.right);
+                    let Some(p) = new_point(&self.cfg, &mut self.window, at, obs, tie.track_id)
+                    else {
                         continue;
                     };
                     if let Some(e) = self.track_points.get_mut(tie.slot as usize) {
@@ -606,12 +657,10 @@ impl<'a> Traverse<'a> {
                     p
                 }
             };
-            for (cam, px) in [(Camera::Left, tie.cur.left), (Camera::Right, tie.cur.right)] {
-                let o = observation(&self.cfg, id, cam, point, px, tie.track_id);
-                let _ = self.window.add_observation(o);
-            }
+            let obs = (tie.cur.left, tie.cur.right);
+            add_stereo_observations(&self.cfg, &mut self.window, id, point, obs, tie.track_id);
         }
-        new_points
+        new_points + self.add_area_ties(id, (prev_id, &prev))
     }
 
     /// Adjusts the window; on failure ties the new epoch to its prediction and tries once more.
@@ -694,46 +743,58 @@ fn observation(
     o
 }
 
-/// Intersects a new tie point from the previous epoch's stereo pair (`at`: its window
-/// epoch id and its left and right poses) and adds it with its two observations there.
+/// Observations of `point` in both images of window epoch `id`.
+fn add_stereo_observations(
+    cfg: &TraverseConfig,
+    window: &mut Window,
+    id: u32,
+    point: u32,
+    (left, right): ([f32; 2], [f32; 2]),
+    tag: u32,
+) {
+    for (cam, px) in [(Camera::Left, left), (Camera::Right, right)] {
+        let _ = window.add_observation(observation(cfg, id, cam, point, px, tag));
+    }
+}
+
+/// Intersects a point from a stereo observation (`left` and `right` pixels) of the
+/// epoch with left and right poses `poses`; `None` when the rays barely intersect or
+/// the point is behind the camera or beyond `max_depth_m`.
+fn intersect_pair(
+    cfg: &TraverseConfig,
+    poses: &[Pose; 2],
+    left: [f32; 2],
+    right: [f32; 2],
+) -> Option<[f64; 3]> {
+    let rig = &cfg.rig;
+    let ray = |pose: &Pose, interior: &crate::camera::Interior, px: [f32; 2]| Ray {
+        pose: *pose,
+        focal_mm: interior.focal_mm,
+        xy: interior.pixel_to_corrected(px[0] as f64, px[1] as f64),
+    };
+    let rays = [
+        ray(&poses[0], &rig.left, left),
+        ray(&poses[1], &rig.right, right),
+    ];
+    let x = intersect(&rays, cfg.min_ray_angle_rad).ok()?;
+    let depth = -poses[0].to_camera(&x.point)[2];
+    (depth > 0.0 && depth <= cfg.max_depth_m).then_some(x.point)
+}
+
+/// Intersects a new tie point from its stereo observation `obs` at the previous epoch
+/// (`at`: its window epoch id and its left and right poses) and adds it with those two
+/// observations, tagged `tag`.
 fn new_point(
     cfg: &TraverseConfig,
     window: &mut Window,
     at: (u32, &[Pose; 2]),
-    tie: &TiePoint,
+    obs: ([f32; 2], [f32; 2]),
+    tag: u32,
 ) -> Option<u32> {
-    let (prev_id, [left, right]) = at;
-    let rig = &cfg.rig;
-    let xl = rig
-        .left
-        .pixel_to_corrected(tie.prev.left[0] as f64, tie.prev.left[1] as f64);
-    let xr = rig
-        .right
-        .pixel_to_corrected(tie.prev.right[0] as f64, tie.prev.right[1] as f64);
-    let rays = [
-        Ray {
-            pose: *left,
-            focal_mm: rig.left.focal_mm,
-            xy: xl,
-        },
-        Ray {
-            pose: *right,
-            focal_mm: rig.right.focal_mm,
-            xy: xr,
-        },
-    ];
-    let x = intersect(&rays, cfg.min_ray_angle_rad).ok()?;
-    let depth = -left.to_camera(&x.point)[2];
-    if !(depth > 0.0 && depth <= cfg.max_depth_m) {
-        return None;
-    }
-    let point = window.add_point(x.point).ok()?;
-    for (cam, px) in [
-        (Camera::Left, tie.prev.left),
-        (Camera::Right, tie.prev.right),
-    ] {
-        let _ = window.add_observation(observation(cfg, prev_id, cam, point, px, tie.track_id));
-    }
+    let (prev_id, poses) = at;
+    let xyz = intersect_pair(cfg, poses, obs.0, obs.1)?;
+    let point = window.add_point(xyz).ok()?;
+    add_stereo_observations(cfg, window, prev_id, point, obs, tag);
     Some(point)
 }
 

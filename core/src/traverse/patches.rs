@@ -8,20 +8,54 @@
 //! into a drift of pitch and scale. Correlating the previous template puts the current
 //! observation on the same surface point; the stereo refinement then carries it to the
 //! right image.
+//!
+//! Each template also remembers what it is a view of ([`PatchInfo`]): its right
+//! position at the same epoch and the window point it already is, if any, so the
+//! templates the descriptors did not carry on can be found by area alone (`area`).
 use crate::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget, OutOfMemory};
 use crate::image::ImageView;
 use crate::matching::refine::{sample_template, TEMPLATE_LEN};
+use bytemuck::{Pod, Zeroable};
 
 /// Fixed-point scale of the stored samples (8 fractional bits of a grey level).
 const SCALE: f32 = 256.0;
 
+/// No window point / no tag.
+pub const NO_ID: u32 = u32::MAX;
+
+/// What a template shows: the stereo observation it belongs to and its window point.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct PatchInfo {
+    /// Right position (pixels) at the templates' epoch.
+    pub right: [f32; 2],
+    /// Observation tag (track id) of the window point, [`NO_ID`] when there is none.
+    pub tag: u32,
+    /// Window point, [`NO_ID`] for a stereo match that is not a tie point yet.
+    pub point: u32,
+}
+
+impl PatchInfo {
+    /// A stereo match that is no window point yet.
+    pub fn stereo(right: [f32; 2]) -> Self {
+        PatchInfo {
+            right,
+            tag: NO_ID,
+            point: NO_ID,
+        }
+    }
+}
+
 /// Templates keyed by the pixel position the matcher reports for them next epoch.
 pub struct Patches<'a> {
     keys: &'a mut [[f32; 2]],
+    info: &'a mut [PatchInfo],
     samples: &'a mut [u16],
     n: usize,
     half: usize,
     dropped: u32,
+    /// Window epoch id of the image the templates come from.
+    epoch: Option<u32>,
 }
 
 fn side(half: usize) -> usize {
@@ -37,6 +71,11 @@ impl<'a> Patches<'a> {
             slice_bytes::<[f32; 2]>(capacity),
         );
         budget.add(
+            "traverse.patch_info",
+            ComponentKind::Storage,
+            slice_bytes::<PatchInfo>(capacity),
+        );
+        budget.add(
             "traverse.patches",
             ComponentKind::Storage,
             slice_bytes::<u16>(capacity * len),
@@ -47,16 +86,31 @@ impl<'a> Patches<'a> {
         let len = side(half) * side(half);
         Ok(Patches {
             keys: arena.alloc_slice(capacity)?,
+            info: arena.alloc_slice(capacity)?,
             samples: arena.alloc_slice(capacity * len)?,
             n: 0,
             half,
             dropped: 0,
+            epoch: None,
         })
     }
 
-    pub fn clear(&mut self) {
+    /// Empties the store for the templates of window epoch `epoch` (`None`: an image
+    /// that is not in the window, whose templates must not be used).
+    pub fn clear(&mut self, epoch: Option<u32>) {
         self.n = 0;
         self.dropped = 0;
+        self.epoch = epoch;
+    }
+
+    /// Window epoch id the templates were taken at.
+    pub fn epoch(&self) -> Option<u32> {
+        self.epoch
+    }
+
+    /// Template half-size (pixels).
+    pub fn half(&self) -> usize {
+        self.half
     }
 
     pub fn len(&self) -> usize {
@@ -73,7 +127,7 @@ impl<'a> Patches<'a> {
     }
 
     /// Stores the template around `at` in `img`; false when full or at the border.
-    pub fn push(&mut self, img: &ImageView<'_>, at: [f32; 2]) -> bool {
+    pub fn push(&mut self, img: &ImageView<'_>, at: [f32; 2], info: PatchInfo) -> bool {
         if self.n >= self.keys.len() {
             self.dropped = self.dropped.saturating_add(1);
             return false;
@@ -88,15 +142,36 @@ impl<'a> Patches<'a> {
             *d = (v * SCALE + 0.5) as u16;
         }
         self.keys[self.n] = at;
+        self.info[self.n] = info;
         self.n += 1;
         true
     }
 
+    /// Index of the template stored at exactly `key`.
+    pub fn index_of(&self, key: [f32; 2]) -> Option<usize> {
+        self.keys[..self.n].iter().position(|k| *k == key)
+    }
+
     /// The template stored at exactly `key`, expanded into `out`.
     pub fn find(&self, key: [f32; 2], out: &mut [f32; TEMPLATE_LEN]) -> bool {
-        let Some(i) = self.keys[..self.n].iter().position(|k| *k == key) else {
+        self.index_of(key).is_some_and(|i| self.template(i, out))
+    }
+
+    /// Position (pixels) of template `i` in its image.
+    pub fn key(&self, i: usize) -> Option<[f32; 2]> {
+        self.keys[..self.n].get(i).copied()
+    }
+
+    /// What template `i` shows.
+    pub fn info(&self, i: usize) -> Option<PatchInfo> {
+        self.info[..self.n].get(i).copied()
+    }
+
+    /// Template `i`, expanded into `out`; false when there is no such template.
+    pub fn template(&self, i: usize, out: &mut [f32; TEMPLATE_LEN]) -> bool {
+        if i >= self.n {
             return false;
-        };
+        }
         let len = side(self.half) * side(self.half);
         for (o, &s) in out.iter_mut().zip(&self.samples[i * len..(i + 1) * len]) {
             *o = s as f32 / SCALE;
@@ -117,10 +192,18 @@ mod tests {
         let mut store = [0u8; 4096];
         let mut arena = Arena::new(&mut store);
         let mut p = Patches::new(&mut arena, 2, 2).unwrap();
-        assert!(p.push(&view, [10.25, 12.5]));
-        assert!(!p.push(&view, [0.5, 0.5]), "border");
-        assert!(p.push(&view, [20.0, 15.0]));
-        assert!(!p.push(&view, [21.0, 15.0]), "full");
+        let info = PatchInfo {
+            right: [4.0, 12.5],
+            tag: 7,
+            point: 3,
+        };
+        assert!(p.push(&view, [10.25, 12.5], info));
+        assert!(!p.push(&view, [0.5, 0.5], info), "border");
+        assert!(p.push(&view, [20.0, 15.0], PatchInfo::stereo([12.0, 15.0])));
+        assert!(!p.push(&view, [21.0, 15.0], info), "full");
+        assert_eq!(p.info(0), Some(info));
+        assert_eq!(p.info(1).map(|i| i.point), Some(NO_ID));
+        assert_eq!(p.index_of([20.0, 15.0]), Some(1));
         assert_eq!((p.len(), p.dropped()), (2, 1));
         let mut t = [0f32; TEMPLATE_LEN];
         assert!(p.find([10.25, 12.5], &mut t));

@@ -1,0 +1,169 @@
+//! Tie points carried on by area matching: the previous epoch's stereo observations
+//! that the descriptor quads did not continue are looked for in the current images
+//! around the place the resected pose projects them to.
+//!
+//! Why: a quad needs one point detected as a keypoint in four images and matched three
+//! times by descriptor. On the rendered streets only about 40 % of an epoch's stereo
+//! matches get through (detector repeatability and the ratio test each lose some), so
+//! tracks are short and consecutive epochs share few points, which is what lets the
+//! attitude (roll above all) wander. Here the prediction is good to a fraction of a
+//! pixel (the object point from the window, or intersected from the previous stereo
+//! pair; the current pose resected from the descriptor tie points), so a small
+//! correlation search is enough and leaves little room for a false match; the stereo
+//! refinement then finds the right position, with its back check. Tie points found by
+//! descriptors win every conflict, so an image point is observed once.
+
+use super::patches::{PatchInfo, NO_ID};
+use super::Traverse;
+use crate::camera::{project_to_pixel, Pose};
+use crate::image::ImageView;
+use crate::matching::refine::{correlate, refine_checked, TEMPLATE_LEN};
+use bytemuck::{Pod, Zeroable};
+
+/// A tie point found by area matching.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct AreaTie {
+    /// Template index in the patch store (the previous epoch's observation).
+    pub entry: u32,
+    /// Observation tag (track id) and window point; [`NO_ID`] until the point exists.
+    pub tag: u32,
+    pub point: u32,
+    /// Current left and right positions, pixels.
+    pub left: [f32; 2],
+    pub right: [f32; 2],
+}
+
+/// Two observations closer than this (pixels, each axis) are the same image point.
+const SAME_POINT_PX: f32 = 1.0;
+/// Correlation search radius around the predicted left position, whole pixels.
+const SEARCH_PX: usize = 3;
+
+fn near(a: [f32; 2], b: [f32; 2]) -> bool {
+    (a[0] - b[0]).abs() < SAME_POINT_PX && (a[1] - b[1]).abs() < SAME_POINT_PX
+}
+
+impl Traverse<'_> {
+    /// Finds the templates of the previous window epoch that no descriptor tie point
+    /// continued in the current images, with the current left pose `initial`.
+    pub(super) fn track_by_area(&mut self, left: &ImageView, right: &ImageView, initial: &Pose) {
+        self.n_area = 0;
+        let (Some(patches), Some(rcfg)) = (&self.patches, self.cfg.matching.refine) else {
+            return;
+        };
+        let Some(last) = self.window.n_epochs().checked_sub(1) else {
+            return;
+        };
+        if patches.epoch().is_none() || self.window.epoch_id(last) != patches.epoch() {
+            return;
+        }
+        let Some(prev_left) = self.window.epoch_pose(last) else {
+            return;
+        };
+        let prev = [prev_left, self.right_of(&prev_left)];
+        let cur = [*initial, self.right_of(initial)];
+        let mut tpl = [0f32; TEMPLATE_LEN];
+        for i in 0..patches.len() {
+            if self.n_area >= self.area.len() {
+                break;
+            }
+            let (Some(key), Some(info)) = (patches.key(i), patches.info(i)) else {
+                continue;
+            };
+            if self.matcher.tie_points().any(|t| t.prev.left == key) {
+                continue;
+            }
+            let Some([pl, pr]) = self.predict(&prev, &cur, key, &info) else {
+                continue;
+            };
+            if !patches.template(i, &mut tpl) {
+                continue;
+            }
+            let search = (SEARCH_PX, SEARCH_PX);
+            let Ok((l, _)) = correlate(&tpl, patches.half(), left, pl, search, rcfg.min_ncc) else {
+                continue;
+            };
+            let Ok((r, _)) = refine_checked(left, right, l, pr, &rcfg) else {
+                continue;
+            };
+            let taken = self.matcher.tie_points().any(|t| near(t.cur.left, l))
+                || self.area[..self.n_area].iter().any(|a| near(a.left, l));
+            if taken {
+                continue;
+            }
+            self.area[self.n_area] = AreaTie {
+                entry: i as u32,
+                tag: info.tag,
+                point: info.point,
+                left: l,
+                right: r,
+            };
+            self.n_area += 1;
+        }
+    }
+
+    /// Current left and right pixel positions predicted for a template's point.
+    fn predict(
+        &self,
+        prev: &[Pose; 2],
+        cur: &[Pose; 2],
+        key: [f32; 2],
+        info: &PatchInfo,
+    ) -> Option<[[f32; 2]; 2]> {
+        let xyz = if info.point != NO_ID {
+            self.window.point(info.point)?
+        } else {
+            super::intersect_pair(&self.cfg, prev, key, info.right)?
+        };
+        let depth = -cur[0].to_camera(&xyz)[2];
+        if !(depth > 0.0 && depth <= self.cfg.max_depth_m) {
+            return None;
+        }
+        let l = project_to_pixel(&cur[0], &self.cfg.rig.left, &xyz).ok()?;
+        let r = project_to_pixel(&cur[1], &self.cfg.rig.right, &xyz).ok()?;
+        let px = |p: [f64; 2]| [p[0] as f32, p[1] as f32];
+        Some([px(l), px(r)])
+    }
+
+    /// Adds the area tie points to the window epoch `id` (the previous one is
+    /// `prev_id` with poses `prev`): points they already are get the new observations,
+    /// the others are intersected from the previous stereo pair first.
+    pub(super) fn add_area_ties(&mut self, id: u32, (prev_id, prev): (u32, &[Pose; 2])) -> u32 {
+        let mut new_points = 0;
+        for a in 0..self.n_area {
+            let t = self.area[a];
+            let (tag, point) = if t.point != NO_ID {
+                (t.tag, t.point)
+            } else {
+                let Some(p) = self.patches.as_ref().and_then(|p| {
+                    Some((p.key(t.entry as usize)?, p.info(t.entry as usize)?.right))
+                }) else {
+                    continue;
+                };
+                let tag = self.matcher.new_track_id();
+                let at = (prev_id, prev);
+                let Some(point) = super::new_point(&self.cfg, &mut self.window, at, p, tag) else {
+                    continue;
+                };
+                new_points += 1;
+                (tag, point)
+            };
+            let obs = (t.left, t.right);
+            super::add_stereo_observations(&self.cfg, &mut self.window, id, point, obs, tag);
+            self.area[a].tag = tag;
+            self.area[a].point = point;
+        }
+        new_points
+    }
+}
+
+/// A template's metadata for an area tie point of the current epoch.
+impl From<&AreaTie> for PatchInfo {
+    fn from(a: &AreaTie) -> Self {
+        PatchInfo {
+            right: a.right,
+            tag: a.tag,
+            point: a.point,
+        }
+    }
+}
