@@ -33,7 +33,7 @@ impl Clock for ThreadClock {
 }
 
 const KEYS: &str = "keypoints contrast window sigma_px max_iterations tolerance \
-                    robust_rounds ratio tie_points keep_exclusions fine_octave levels edge velocity_sigma robust max_depth min_ray_angle_deg refine temporal_refine min_ncc back_check area step_angle step_position";
+                    robust_rounds ratio tie_points keep_exclusions fine_octave levels edge velocity_sigma robust max_depth min_ray_angle_deg refine temporal_refine min_ncc back_check area step_angle step_position estimate_rig";
 
 fn apply(cfg: &mut TraverseConfig, key: &str, value: &str) -> Result<(), String> {
     let f = || {
@@ -98,6 +98,7 @@ fn apply(cfg: &mut TraverseConfig, key: &str, value: &str) -> Result<(), String>
                 r.back_check_px = f()? as f32;
             }
         }
+        "estimate_rig" => *cfg = cfg.with_rig_estimation(f()? != 0.0),
         "keep_exclusions" => cfg.adjust.keep_exclusions = f()? != 0.0,
         _ => return Err(format!("unknown key {key}; keys: {KEYS}")),
     }
@@ -215,6 +216,9 @@ fn main() -> Result<(), String> {
                 "{i}: L {} R {} | TL {} TR {} BL {} BR {}",
                 m[0], m[1], m[2], m[3], m[4], m[5]
             );
+        }
+        if out.flags & 0x40 != 0 {
+            eprintln!("{i}: solve failed: {:?}", trav.last_solve_error());
         }
         if std::env::var_os("PT_MATCH_DEBUG").is_some() {
             eprintln!("{i}: {:?}", trav.match_report());

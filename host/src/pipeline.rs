@@ -62,7 +62,7 @@ impl DatumSettings {
 /// keypoints_per_image = 1000   # features kept per image
 /// octaves = 4                  # scale-space octaves
 /// scales_per_octave = 3
-/// contrast_threshold = 0.02    # DoG contrast, grey levels / 255
+/// contrast_threshold = 0.015   # DoG contrast, grey levels / 255
 /// fine_octave = false          # half-pixel scales too: ~2x keypoints, ~2x SIFT time
 /// edge_ratio = 10.0            # principal curvature ratio
 /// match_ratio = 0.8            # Lowe's ratio
@@ -102,7 +102,7 @@ impl Default for PipelineSettings {
             keypoints_per_image: 1000,
             octaves: 4,
             scales_per_octave: 3,
-            contrast_threshold: 0.02,
+            contrast_threshold: phototraverse_core::traverse::config::TRAVERSE_CONTRAST,
             fine_octave: false,
             edge_ratio: 10.0,
             match_ratio: 0.8,

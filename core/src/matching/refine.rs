@@ -69,6 +69,80 @@ fn bilinear(img: &ImageView<'_>, x: f32, y: f32) -> f32 {
     top * (1.0 - fy) + bot * fy
 }
 
+/// Sub-pixel refinement of a correlation peak at `centre` (whole pixels from an
+/// unscaled search) for a template whose surface appears `scale` times larger in
+/// `img` (a point approached by the camera): the 3 x 3 positions around `centre` are
+/// correlated with the image sampled every `scale` pixels, and parabolas through them
+/// give the position. Errors as [`correlate`]; `PeakOnEdge` when the scaled peak is not
+/// the centre.
+pub fn refine_scaled(
+    tpl: &[f32; TEMPLATE_LEN],
+    h: usize,
+    img: &ImageView<'_>,
+    centre: [f32; 2],
+    scale: f32,
+    min_ncc: f32,
+) -> Result<([f32; 2], f32), RefineError> {
+    let h = h.min(MAX_REFINE_HALF);
+    let (n, hf) = (2 * h + 1, h as f32);
+    if !(scale.is_finite() && (0.5..=2.0).contains(&scale)) {
+        return Err(RefineError::Flat);
+    }
+    let reach = scale * hf + 2.0;
+    if !centre.iter().all(|v| v.is_finite()) || !inside(img, centre[0], centre[1], reach) {
+        return Err(RefineError::Border);
+    }
+    let Some((zt, tnorm)) = zero_mean(tpl, n) else {
+        return Err(RefineError::Flat);
+    };
+    let cnt = (n * n) as f32;
+    let mut score = [0f32; 9];
+    for (k, sc) in score.iter_mut().enumerate() {
+        let cx = centre[0] + (k % 3) as f32 - 1.0;
+        let cy = centre[1] + (k / 3) as f32 - 1.0;
+        let (mut sum, mut sum2, mut cross) = (0f32, 0f32, 0f32);
+        for v in 0..n {
+            for u in 0..n {
+                let x = cx + scale * (u as f32 - hf);
+                let y = cy + scale * (v as f32 - hf);
+                let s = bilinear(img, x, y);
+                sum += s;
+                sum2 += s * s;
+                cross += s * zt[v * n + u];
+            }
+        }
+        let var = sum2 - sum * sum / cnt;
+        *sc = if var > 1e-3 * cnt {
+            cross / libm::sqrtf(var * tnorm)
+        } else {
+            -1.0
+        };
+    }
+    let peak = score[4];
+    if peak < min_ncc {
+        return Err(RefineError::LowScore);
+    }
+    if score.iter().any(|&v| v > peak) {
+        return Err(RefineError::PeakOnEdge);
+    }
+    let dx = parabola(score[3], peak, score[5]);
+    let dy = parabola(score[1], peak, score[7]);
+    Ok(([centre[0] + dx, centre[1] + dy], peak))
+}
+
+/// Zero-mean copy of the `n x n` template and its squared norm; `None` when flat.
+fn zero_mean(tpl: &[f32; TEMPLATE_LEN], n: usize) -> Option<([f32; TEMPLATE_LEN], f32)> {
+    let cnt = (n * n) as f32;
+    let mean = tpl[..n * n].iter().sum::<f32>() / cnt;
+    let mut zt = [0f32; TEMPLATE_LEN];
+    let mut tnorm = 0f32;
+    for (z, &t) in zt.iter_mut().zip(&tpl[..n * n]) {
+        *z = t - mean;
+        tnorm += *z * *z;
+    }
+    (tnorm >= 1e-3 * cnt).then_some((zt, tnorm))
+}
+
 /// Bilinear samples of the `w x h` grid at `origin + (u, v)` into `out` (row stride
 /// [`R`]); the caller guarantees the grid lies inside the image with a pixel to spare.
 fn sample_region(
@@ -171,18 +245,10 @@ pub fn correlate(
     if !centre.iter().all(|v| v.is_finite()) || !inside(img, centre[0], centre[1], reach) {
         return Err(RefineError::Border);
     }
-    // Zero-mean template and its norm.
     let cnt = (n * n) as f32;
-    let mean = tpl[..n * n].iter().sum::<f32>() / cnt;
-    let mut zt = [0f32; TEMPLATE_LEN];
-    let mut tnorm = 0f32;
-    for (z, &t) in zt.iter_mut().zip(&tpl[..n * n]) {
-        *z = t - mean;
-        tnorm += *z * *z;
-    }
-    if tnorm < 1e-3 * cnt {
+    let Some((zt, tnorm)) = zero_mean(tpl, n) else {
         return Err(RefineError::Flat);
-    }
+    };
     // Every position of the search shares the fractional part of `centre`: sample the
     // region once (bilinear) and slide the template over it by whole pixels.
     let (rw, rh) = (n + 2 * rx, n + 2 * ry);

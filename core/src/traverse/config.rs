@@ -61,9 +61,17 @@ pub struct TraverseConfig {
     pub max_area_ties: usize,
 }
 
+/// Shortest window with the rig estimated ([`TraverseConfig::with_rig_estimation`]).
+pub const RIG_ESTIMATION_WINDOW: usize = 8;
+
+/// DoG contrast threshold of the traverse (grey levels / 255): lower than SIFT's
+/// usual 0.04, for the area tracks it feeds (docs/configuration.md).
+pub const TRAVERSE_CONTRAST: f32 = 0.015;
+
 impl TraverseConfig {
-    /// Defaults for a rig and image size: 1000 keypoints per image, an 8-epoch window,
-    /// robust weighting, base-length and smoothness constraints switched on.
+    /// Defaults for a rig and image size: 1000 keypoints per image at contrast 0.015,
+    /// a 3-epoch window, tie points carried on by area matching, robust weighting,
+    /// base-length and smoothness constraints switched on.
     pub fn for_rig(rig: Rig, datum: Pose) -> Self {
         let (w, h) = (rig.left.width_px, rig.left.height_px);
         let max_keypoints = 1000;
@@ -71,6 +79,7 @@ impl TraverseConfig {
             max_width: w as usize,
             max_height: h as usize,
             max_keypoints,
+            contrast_threshold: TRAVERSE_CONTRAST,
             ..SiftConfig::default()
         };
         let mut matching = MatchConfig::rectified(w, h, max_keypoints, w as f32 * 0.5);
@@ -349,6 +358,14 @@ impl TraverseConfig {
         self.adjust.estimate_rig = on;
         self.adjust.self_calibration = on.then(|| self.interior_sigmas());
         if on {
+            // The rig and interior blocks are shared by the window's epochs: in three
+            // epochs they trade against the poses (singular solves on the realistic
+            // `curves`), in eight they do not.
+            if self.adjust.window < RIG_ESTIMATION_WINDOW {
+                self.adjust.window = RIG_ESTIMATION_WINDOW;
+                self.matching.track_history = RIG_ESTIMATION_WINDOW;
+                self.fit_capacities();
+            }
             self.matching.stereo = StereoGeometry::Rig {
                 rig: self.rig,
                 tolerance_px: RIG_ESTIMATION_TOLERANCE_PX,

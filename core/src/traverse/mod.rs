@@ -171,6 +171,8 @@ pub struct Traverse<'a> {
     prev_window_epoch: Option<u32>,
     /// The matcher's report of the last epoch (diagnostics).
     last_match: crate::matching::EpochReport,
+    /// Why the last failed adjustment failed (diagnostics).
+    last_solve_error: Option<AdjustError>,
 }
 
 impl<'a> Traverse<'a> {
@@ -217,12 +219,18 @@ impl<'a> Traverse<'a> {
             history: [None, None],
             prev_window_epoch: None,
             last_match: Default::default(),
+            last_solve_error: None,
         })
     }
 
     /// What the matcher did at the last epoch (counts per step, for diagnostics).
     pub fn match_report(&self) -> &crate::matching::EpochReport {
         &self.last_match
+    }
+
+    /// Why the last adjustment that failed did so (diagnostics).
+    pub fn last_solve_error(&self) -> Option<AdjustError> {
+        self.last_solve_error
     }
 
     pub fn config(&self) -> &TraverseConfig {
@@ -666,7 +674,8 @@ impl<'a> Traverse<'a> {
     /// Adjusts the window; on failure ties the new epoch to its prediction and tries once more.
     fn solve(&mut self, id: u32, prediction: &Pose, out: &mut EpochOutput) -> bool {
         let mut result = self.window.solve();
-        if result.is_err() {
+        if let Err(e) = result {
+            self.last_solve_error = Some(e);
             out.flags |= flags::SOLVE_FAILED;
             let _ = self
                 .window
