@@ -1115,6 +1115,7 @@ impl<'a> Window<'a> {
     }
 
     /// Projection through the cached rotations of epoch `slot` and the rig.
+    #[inline]
     fn project(
         &self,
         slot: usize,

@@ -36,8 +36,11 @@ pub struct AreaTie {
 
 /// Two observations closer than this (pixels, each axis) are the same image point.
 const SAME_POINT_PX: f32 = 1.0;
-/// Correlation search radius around the predicted left position, whole pixels.
-const SEARCH_PX: usize = 3;
+/// Correlation search radius around the predicted left position, whole pixels: a
+/// resected pose predicts to a fraction of a pixel, the motion prediction alone (the
+/// resection failed) to a few.
+const SEARCH_PX: usize = 2;
+const SEARCH_PREDICTED_PX: usize = 3;
 
 fn near(a: [f32; 2], b: [f32; 2]) -> bool {
     (a[0] - b[0]).abs() < SAME_POINT_PX && (a[1] - b[1]).abs() < SAME_POINT_PX
@@ -45,8 +48,14 @@ fn near(a: [f32; 2], b: [f32; 2]) -> bool {
 
 impl Traverse<'_> {
     /// Finds the templates of the previous window epoch that no descriptor tie point
-    /// continued in the current images, with the current left pose `initial`.
-    pub(super) fn track_by_area(&mut self, left: &ImageView, right: &ImageView, initial: &Pose) {
+    /// continued in the current images, with the current left pose `initial`
+    /// (`resected`: from the resection, else the motion prediction).
+    pub(super) fn track_by_area(
+        &mut self,
+        left: &ImageView,
+        right: &ImageView,
+        (initial, resected): (&Pose, bool),
+    ) {
         self.n_area = 0;
         let (Some(patches), Some(rcfg)) = (&self.patches, self.cfg.matching.refine) else {
             return;
@@ -79,7 +88,12 @@ impl Traverse<'_> {
             if !patches.template(i, &mut tpl) {
                 continue;
             }
-            let search = (SEARCH_PX, SEARCH_PX);
+            let r = if resected {
+                SEARCH_PX
+            } else {
+                SEARCH_PREDICTED_PX
+            };
+            let search = (r, r);
             let Ok((l, _)) = correlate(&tpl, patches.half(), left, pl, search, rcfg.min_ncc) else {
                 continue;
             };

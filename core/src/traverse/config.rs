@@ -114,7 +114,7 @@ impl TraverseConfig {
             max_points: 1,
             max_observations: 1,
             max_iterations: 20,
-            max_robust_rounds: 4,
+            max_robust_rounds: 2,
             estimate_rig: false,
             sigmas: ConstraintSigmas {
                 base_length_m: 1e-4,

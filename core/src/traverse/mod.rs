@@ -546,16 +546,17 @@ impl<'a> Traverse<'a> {
         t_start: u64,
     ) -> bool {
         let first = self.window.n_epochs() == 0 && self.history[1].is_none();
-        let initial = if first {
-            self.cfg.datum
-        } else {
-            self.resect().unwrap_or_else(|| {
+        let resected = if first { None } else { self.resect() };
+        let initial = match resected {
+            Some(pose) => pose,
+            None if first => self.cfg.datum,
+            None => {
                 out.flags |= flags::NO_RESECTION;
                 *prediction
-            })
+            }
         };
         let ta = clock.now_us();
-        self.track_by_area(left, right, &initial);
+        self.track_by_area(left, right, (&initial, resected.is_some()));
         let area_us = elapsed(ta, clock.now_us());
         out.times.matching_us = out.times.matching_us.saturating_add(area_us);
         out.tie_points += self.n_area as u32;
