@@ -71,9 +71,16 @@ impl Traverse<'_> {
         };
         let prev = [prev_left, self.right_of(&prev_left)];
         let cur = [*initial, self.right_of(initial)];
+        // Descriptor and area tie points share the epoch's tie point capacity, which
+        // sizes the window (TraverseConfig::fit_capacities).
+        let taken = self.matcher.tie_points().count();
+        let room = self
+            .area
+            .len()
+            .min(self.cfg.matching.max_tie_points.saturating_sub(taken));
         let mut tpl = [0f32; TEMPLATE_LEN];
         for i in 0..patches.len() {
-            if self.n_area >= self.area.len() {
+            if self.n_area >= room {
                 break;
             }
             let (Some(key), Some(info)) = (patches.key(i), patches.info(i)) else {

@@ -156,7 +156,8 @@ impl TraverseConfig {
     /// changing any of `sift.max_width`, `sift.max_keypoints`, `matching.max_tracks`,
     /// `matching.max_keypoints` or `adjust.window`.
     ///
-    /// - tie points per epoch: at most [`MAX_TIE_POINTS`], the tracks and the keypoints;
+    /// - tie points per epoch (found by descriptors and by area together): at most
+    ///   [`MAX_TIE_POINTS`], the tracks and the keypoints;
     /// - window points: each epoch creates at most one point per tie point, and a point
     ///   lives while one of its observations is in the window: `tie points x window`;
     /// - window observations: an epoch holds two per tie point (left and right) plus two
