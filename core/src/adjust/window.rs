@@ -1952,7 +1952,7 @@ impl<'a> Window<'a> {
     /// the whole set); otherwise the robust identification runs.
     fn detection_passes(&mut self) -> Result<bool, AdjustError> {
         let mut r = Report::default();
-        self.quality(&mut r)?;
+        self.global_test(&mut r)?;
         // Only the upper tail is evidence of blunders; a sigma0 below its bound says
         // the a-priori sigma was pessimistic, and identification would be wasted work.
         if r.chi2.statistic > r.chi2.upper {
@@ -2080,9 +2080,10 @@ impl<'a> Window<'a> {
 
     /// sigma0, chi-square, redundancy, and standard deviations from the inverse
     /// of the undamped reduced normal matrix (scaled by sigma0^2).
-    fn quality(&mut self, report: &mut Report) -> Result<(), AdjustError> {
+    /// Counts, redundancy, sigma0 and the global chi-square test of the current
+    /// solution into `report`; returns the variance factor.
+    fn global_test(&mut self, report: &mut Report) -> Result<f64, AdjustError> {
         let nc = self.n_cam();
-        let rig_block = self.rig_block();
         let (obs_cost, behind) = self.cost();
         let (_, n_constraints) = self.add_constraints(false);
         let mut n_obs = 0;
@@ -2136,7 +2137,15 @@ impl<'a> Window<'a> {
         let s02 = obs_cost / dof as f64;
         report.sigma0 = libm::sqrt(s02);
         report.chi2 = ChiSquareTest::new(obs_cost, dof);
+        Ok(s02)
+    }
 
+    /// [`Self::global_test`], then the precisions: camera, rig and interior covariances
+    /// and the points' standard deviations.
+    fn quality(&mut self, report: &mut Report) -> Result<(), AdjustError> {
+        let s02 = self.global_test(report)?;
+        let nc = self.n_cam();
+        let rig_block = self.rig_block();
         // Undamped reduced matrix, inverted in place: Q_cc.
         self.step_matrix_only()?;
         cholesky::invert_in_place(&mut self.reduced[..nc * nc], nc);
@@ -2200,11 +2209,11 @@ impl<'a> Window<'a> {
 
     /// Builds the undamped reduced matrix and factors it (for the covariance).
     fn step_matrix_only(&mut self) -> Result<(), AdjustError> {
-        // step() applies a step; build it with lambda = 0 on a saved state and
-        // put the state back: the matrix stays factored in `reduced`.
-        self.save();
-        let res = self.step(0.0);
-        self.restore();
+        // The matrix of an undamped step, without the step.
+        let nc = self.n_cam();
+        self.build(0.0);
+        let res = cholesky::factor(&mut self.reduced[..nc * nc], nc, cholesky::PIVOT_REL_TOL)
+            .map_err(|e| e.row / 6);
         res.map_err(|slot| {
             self.singular_epoch = Some(slot.min(self.n_epochs.saturating_sub(1)));
             AdjustError::Singular { epoch: slot }
