@@ -63,7 +63,14 @@ pub struct SiftConfig {
     /// octave 0: the fine scales OpenCV reaches by doubling the image, at a quarter of the
     /// cost of doubling. Requires `input_sigma < sigma0 / 2`.
     pub fine_octave: bool,
+    /// Gradient operator of orientations and descriptors in the regular octaves.
+    pub gradient: Gradient,
+    /// Gradient operator of orientations and descriptors in the fine octave, whose levels
+    /// are blurred by only 0.8-1.6 pixels, where central differences bend directions most.
+    pub fine_gradient: Gradient,
 }
+
+pub use super::levels::Gradient;
 
 impl Default for SiftConfig {
     fn default() -> Self {
@@ -83,6 +90,8 @@ impl Default for SiftConfig {
             pending_capacity: 2048,
             peak_ratio: 0.8,
             fine_octave: false,
+            gradient: Gradient::Central,
+            fine_gradient: Gradient::Scharr,
         }
     }
 }

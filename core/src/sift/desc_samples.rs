@@ -11,6 +11,7 @@ use core::f32::consts::PI;
 
 use super::config::{DESC_BINS, DESC_GRID, DESC_ORI_BINS};
 use super::fastmath::{atan2_pos, floor_i, round_i};
+use super::levels::Gradient;
 
 /// Padded histogram cells: positions -1..=D on both axes, orientations with a wrap slot.
 pub const P: usize = DESC_BINS + 2;
@@ -108,7 +109,7 @@ impl RowSamples {
     /// Gradients of the placed samples from the window's rows (`rows[i]` is image row
     /// `r_lo + i`), and their Gaussian weights. A sample whose neighbours fall outside the
     /// window keeps weight 0.
-    pub fn gradients(&mut self, rows: &[&[i16]], r_lo: isize, weights: &[f32]) {
+    pub fn gradients(&mut self, rows: &[&[i16]], r_lo: isize, weights: &[f32], op: Gradient) {
         let weights = weights.get(..DESC_GRID).unwrap_or(&[0.0; DESC_GRID]);
         for (j, &weight) in weights.iter().enumerate() {
             self.dx[j] = 0.0;
@@ -117,19 +118,20 @@ impl RowSamples {
             if self.ok[j] == 0 {
                 continue;
             }
-            let i = self.pr[j] as isize - 1 - r_lo;
-            let Some([up, row, down]) = (i >= 0)
-                .then(|| rows.get(i as usize..i as usize + 3))
-                .flatten()
-            else {
+            let i = self.pr[j] as isize - 2 - r_lo;
+            let row = |o: isize| {
+                let at = i + o;
+                if at < 0 {
+                    &[][..]
+                } else {
+                    rows.get(at as usize).copied().unwrap_or(&[])
+                }
+            };
+            let window: [&[i16]; 5] = core::array::from_fn(|o| row(o as isize));
+            let Some((dx, dy)) = op.at(&window, self.pc[j] as usize) else {
                 continue;
             };
-            let c = self.pc[j] as usize;
-            if c + 1 >= row.len() || c >= up.len() || c >= down.len() {
-                continue;
-            }
-            self.dx[j] = (row[c + 1] as i32 - row[c - 1] as i32) as f32;
-            self.dy[j] = (down[c] as i32 - up[c] as i32) as f32;
+            (self.dx[j], self.dy[j]) = (dx, dy);
             self.wgt[j] = weight;
         }
     }

@@ -99,7 +99,7 @@ pub fn describe(
         let wrow = weights
             .get(i * DESC_GRID..(i + 1) * DESC_GRID)
             .unwrap_or(&[]);
-        row.gradients(&rows[..n_rows], r_lo, wrow);
+        row.gradients(&rows[..n_rows], r_lo, wrow, lv.gradient);
         row.magnitudes_and_bins(theta, obin_scale);
         row.scatter(&mut padded);
     }

@@ -43,7 +43,7 @@ pub mod pending;
 pub mod scale_space;
 pub mod select;
 
-pub use config::{Geometry, SiftConfig, SiftError};
+pub use config::{Geometry, Gradient, SiftConfig, SiftError};
 
 use crate::budget::Arena;
 use crate::features::{FeatureSet, Keypoint};
@@ -180,6 +180,14 @@ impl<'a> Sift<'a> {
 
     pub fn geometry(&self) -> &Geometry {
         &self.geo
+    }
+
+    fn gradient(&self, oct: &Octave) -> Gradient {
+        if oct.fine {
+            self.cfg.fine_gradient
+        } else {
+            self.cfg.gradient
+        }
     }
 
     fn geometry_of(&self, oct: &Octave) -> &Geometry {
@@ -397,6 +405,7 @@ impl<'a> Sift<'a> {
     ) {
         let stride = self.cfg.max_width;
         let w = oct.w;
+        let gradient = self.gradient(oct);
         let dog = &*self.dog;
         let lv = Levels {
             data: self.grings,
@@ -404,6 +413,7 @@ impl<'a> Sift<'a> {
             w,
             h: oct.h,
             geo: if oct.fine { &self.fine } else { &self.geo },
+            gradient,
         };
         for l in 1..=self.cfg.levels {
             let row = |layer: usize, rr: usize| {
@@ -474,12 +484,14 @@ impl<'a> Sift<'a> {
         out: &mut FeatureSet,
         stats: &mut SiftStats,
     ) {
+        let gradient = self.gradient(oct);
         let lv = Levels {
             data: self.grings,
             stride: self.cfg.max_width,
             w: oct.w,
             h: oct.h,
             geo: if oct.fine { &self.fine } else { &self.geo },
+            gradient,
         };
         let k = (p.level as usize).clamp(1, self.cfg.levels);
         let sigma0 = if oct.fine {
