@@ -10,15 +10,14 @@ use super::pending::Pending;
 pub const MAX_LEVELS: usize = 8;
 /// Largest Gaussian kernel radius (taps on each side of the centre).
 pub const MAX_RADIUS: usize = 24;
-/// Descriptor samples per spatial bin along each axis (a fixed sampling grid).
-pub const DESC_SAMPLES_PER_BIN: usize = 4;
 /// Descriptor spatial bins along each axis.
 pub const DESC_BINS: usize = 4;
 /// Descriptor orientation bins.
 pub const DESC_ORI_BINS: usize = 8;
-/// Samples of the descriptor grid along one axis: the window covers bins -1..4 so
-/// trilinear interpolation spills into the outer bins as in Lowe's descriptor.
-pub const DESC_GRID: usize = (DESC_BINS + 1) * DESC_SAMPLES_PER_BIN;
+/// Samples of the descriptor grid along one axis, spread uniformly over bins -1..4
+/// (trilinear interpolation spills into the outer bins as in Lowe's descriptor): 3.2
+/// samples per bin, a multiple of the four vector lanes.
+pub const DESC_GRID: usize = 8;
 /// Keypoints are not detected closer than this to the octave border.
 pub const BORDER: usize = 5;
 /// Rows the refinement may move plus the neighbour row it reads.
@@ -68,6 +67,10 @@ pub struct SiftConfig {
     /// Gradient operator of orientations and descriptors in the fine octave, whose levels
     /// are blurred by only 0.8-1.6 pixels, where central differences bend directions most.
     pub fine_gradient: Gradient,
+    /// Orientation votes split between the two nearest histogram bins (instead of all to
+    /// the nearest, as Lowe and OpenCV): small keypoints have few samples in their window,
+    /// and rounding each vote makes the peak jump between bins.
+    pub soft_orientation: bool,
 }
 
 pub use super::levels::Gradient;
@@ -92,6 +95,7 @@ impl Default for SiftConfig {
             fine_octave: false,
             gradient: Gradient::Central,
             fine_gradient: Gradient::Scharr,
+            soft_orientation: false,
         }
     }
 }

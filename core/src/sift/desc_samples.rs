@@ -11,7 +11,7 @@ use core::f32::consts::PI;
 
 use super::config::{DESC_BINS, DESC_GRID, DESC_ORI_BINS};
 use super::fastmath::{atan2_pos, floor_i, round_i};
-use super::levels::Gradient;
+use super::levels::{central, farid, fits, scharr, Gradient};
 
 /// Padded histogram cells: positions -1..=D on both axes, orientations with a wrap slot.
 pub const P: usize = DESC_BINS + 2;
@@ -110,6 +110,23 @@ impl RowSamples {
     /// `r_lo + i`), and their Gaussian weights. A sample whose neighbours fall outside the
     /// window keeps weight 0.
     pub fn gradients(&mut self, rows: &[&[i16]], r_lo: isize, weights: &[f32], op: Gradient) {
+        // One loop per operator, so each is inlined into its own loop.
+        match op {
+            Gradient::Central => self.gradients_with(rows, r_lo, weights, 1, central),
+            Gradient::Scharr => self.gradients_with(rows, r_lo, weights, 1, scharr),
+            Gradient::Farid => self.gradients_with(rows, r_lo, weights, 2, farid),
+        }
+    }
+
+    #[inline(always)]
+    fn gradients_with(
+        &mut self,
+        rows: &[&[i16]],
+        r_lo: isize,
+        weights: &[f32],
+        m: usize,
+        op: impl Fn(&[&[i16]], usize) -> (f32, f32),
+    ) {
         let weights = weights.get(..DESC_GRID).unwrap_or(&[0.0; DESC_GRID]);
         for (j, &weight) in weights.iter().enumerate() {
             self.dx[j] = 0.0;
@@ -118,20 +135,18 @@ impl RowSamples {
             if self.ok[j] == 0 {
                 continue;
             }
-            let i = self.pr[j] as isize - 2 - r_lo;
-            let row = |o: isize| {
-                let at = i + o;
-                if at < 0 {
-                    &[][..]
-                } else {
-                    rows.get(at as usize).copied().unwrap_or(&[])
-                }
-            };
-            let window: [&[i16]; 5] = core::array::from_fn(|o| row(o as isize));
-            let Some((dx, dy)) = op.at(&window, self.pc[j] as usize) else {
+            let i = self.pr[j] as isize - m as isize - r_lo;
+            let Some(window) = (i >= 0)
+                .then(|| rows.get(i as usize..i as usize + 2 * m + 1))
+                .flatten()
+            else {
                 continue;
             };
-            (self.dx[j], self.dy[j]) = (dx, dy);
+            let c = self.pc[j] as usize;
+            if !fits(window, c, m) {
+                continue;
+            }
+            (self.dx[j], self.dy[j]) = op(window, c);
             self.wgt[j] = weight;
         }
     }

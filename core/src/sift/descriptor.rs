@@ -9,7 +9,7 @@
 
 use core::f32::consts::PI;
 
-use super::config::{DESC_BINS, DESC_GRID, DESC_ORI_BINS, DESC_SAMPLES_PER_BIN};
+use super::config::{DESC_BINS, DESC_GRID, DESC_ORI_BINS};
 use super::desc_samples::{Frame, RowSamples, NO, P, PADDED};
 use super::fastmath::{floor_i, round_i};
 use super::levels::Levels;
@@ -36,7 +36,7 @@ pub fn fill_weights(weights: &mut [f32]) {
 /// Bin coordinate of grid sample `i`: uniform over (-1, DESC_BINS).
 #[inline]
 fn grid_bin(i: usize) -> f32 {
-    -1.0 + (i as f32 + 0.5) / DESC_SAMPLES_PER_BIN as f32
+    -1.0 + (i as f32 + 0.5) * ((DESC_BINS + 1) as f32 / DESC_GRID as f32)
 }
 
 /// Computes the descriptor of a keypoint at octave position (`x`, `y`), octave-relative

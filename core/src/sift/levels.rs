@@ -15,6 +15,8 @@ pub struct Levels<'x> {
     pub geo: &'x Geometry,
     /// Gradient operator of orientations and descriptors on these levels.
     pub gradient: Gradient,
+    /// Orientation votes split between the two nearest bins.
+    pub soft_votes: bool,
 }
 
 impl<'x> Levels<'x> {
@@ -76,39 +78,62 @@ impl Gradient {
     #[inline]
     pub fn at(self, rows: &[&[i16]; 5], c: usize) -> Option<(f32, f32)> {
         let m = self.reach();
-        let lo = 2 - m;
-        if c < m || rows[lo..=2 + m].iter().any(|r| c + m >= r.len()) {
+        let window = &rows[2 - m..=2 + m];
+        if !fits(window, c, m) {
             return None;
         }
-        let (up, row, down) = (rows[1], rows[2], rows[3]);
-        let d = |r: &[i16]| r[c + 1] as i32 - r[c - 1] as i32;
-        let v = |i: usize| down[i] as i32 - up[i] as i32;
         Some(match self {
-            Gradient::Central => (d(row) as f32, v(c) as f32),
-            Gradient::Scharr => {
-                let dx = 3 * (d(up) + d(down)) + 10 * d(row);
-                let dy = 3 * (v(c - 1) + v(c + 1)) + 10 * v(c);
-                (dx as f32 * 0.125, dy as f32 * 0.125)
-            }
-            Gradient::Farid => {
-                const P: [f32; 5] = [0.037659, 0.249153, 0.426375, 0.249153, 0.037659];
-                const D: [f32; 5] = [-0.109604, -0.276691, 0.0, 0.276691, 0.109604];
-                let mut dx = 0.0;
-                let mut dy = 0.0;
-                for i in 0..5 {
-                    let r = rows[i];
-                    let mut sx = 0.0;
-                    let mut sp = 0.0;
-                    for j in 0..5 {
-                        let p = r[c + j - 2] as f32;
-                        sx += D[j] * p;
-                        sp += P[j] * p;
-                    }
-                    dx += P[i] * sx;
-                    dy += D[i] * sp;
-                }
-                (dx * 2.0, dy * 2.0)
-            }
+            Gradient::Central => central(window, c),
+            Gradient::Scharr => scharr(window, c),
+            Gradient::Farid => farid(window, c),
         })
     }
+}
+
+/// Do columns `c - m..=c + m` exist in every row of `window`?
+#[inline(always)]
+pub fn fits(window: &[&[i16]], c: usize, m: usize) -> bool {
+    c >= m && window.iter().all(|r| c + m < r.len())
+}
+
+/// Central differences on rows `window[0..3]` (the caller checked [`fits`]).
+#[inline(always)]
+pub fn central(window: &[&[i16]], c: usize) -> (f32, f32) {
+    let (up, row, down) = (window[0], window[1], window[2]);
+    (
+        (row[c + 1] as i32 - row[c - 1] as i32) as f32,
+        (down[c] as i32 - up[c] as i32) as f32,
+    )
+}
+
+/// Scharr's operator on rows `window[0..3]`, scaled like [`central`].
+#[inline(always)]
+pub fn scharr(window: &[&[i16]], c: usize) -> (f32, f32) {
+    let (up, row, down) = (window[0], window[1], window[2]);
+    let d = |r: &[i16]| r[c + 1] as i32 - r[c - 1] as i32;
+    let v = |i: usize| down[i] as i32 - up[i] as i32;
+    let dx = 3 * (d(up) + d(down)) + 10 * d(row);
+    let dy = 3 * (v(c - 1) + v(c + 1)) + 10 * v(c);
+    (dx as f32 * 0.0625, dy as f32 * 0.0625)
+}
+
+/// Farid and Simoncelli's 5-tap operator on rows `window[0..5]`, scaled like [`central`].
+#[inline(always)]
+pub fn farid(window: &[&[i16]], c: usize) -> (f32, f32) {
+    const P: [f32; 5] = [0.037659, 0.249153, 0.426375, 0.249153, 0.037659];
+    const D: [f32; 5] = [-0.109604, -0.276691, 0.0, 0.276691, 0.109604];
+    let mut dx = 0.0;
+    let mut dy = 0.0;
+    for (i, r) in window.iter().enumerate().take(5) {
+        let mut sx = 0.0;
+        let mut sp = 0.0;
+        for j in 0..5 {
+            let p = r[c + j - 2] as f32;
+            sx += D[j] * p;
+            sp += P[j] * p;
+        }
+        dx += P[i] * sx;
+        dy += D[i] * sp;
+    }
+    (dx * 2.0, dy * 2.0)
 }

@@ -414,6 +414,7 @@ impl<'a> Sift<'a> {
             h: oct.h,
             geo: if oct.fine { &self.fine } else { &self.geo },
             gradient,
+            soft_votes: self.cfg.soft_orientation,
         };
         for l in 1..=self.cfg.levels {
             let row = |layer: usize, rr: usize| {
@@ -492,6 +493,7 @@ impl<'a> Sift<'a> {
             h: oct.h,
             geo: if oct.fine { &self.fine } else { &self.geo },
             gradient,
+            soft_votes: self.cfg.soft_orientation,
         };
         let k = (p.level as usize).clamp(1, self.cfg.levels);
         let sigma0 = if oct.fine {

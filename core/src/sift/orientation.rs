@@ -39,9 +39,9 @@ pub fn orientations(
     let r = radius as isize;
     // Large windows are sampled every other pixel: the level is blurred by sigma, so a
     // 2-pixel step above sigma 3 loses little and quarters the cost.
-    let step = if sigma >= 3.0 { 2 } else { 1 };
+    let step = if sigma >= 2.0 { 2 } else { 1 };
     let mut samples = WindowRow::default();
-    let soft = lv.gradient != super::levels::Gradient::Central;
+    let soft = lv.soft_votes;
     for i in (-r..=r).step_by(step) {
         let yy = py + i;
         if yy <= 0 || yy >= h - 1 {

@@ -56,6 +56,9 @@ pub struct Args {
     /// Gradient operator in the fine octave.
     #[arg(long, default_value = "scharr")]
     pub fine_gradient: String,
+    /// Orientation votes split between the two nearest histogram bins.
+    #[arg(long)]
+    pub soft_orientation: bool,
     /// Extract this many times and report the median time.
     #[arg(long, default_value_t = 1)]
     pub repeat: usize,
@@ -120,6 +123,7 @@ impl Args {
             fine_octave: self.fine_octave,
             gradient: parse_gradient(&self.gradient)?,
             fine_gradient: parse_gradient(&self.fine_gradient)?,
+            soft_orientation: self.soft_orientation,
             ..SiftConfig::default()
         })
     }
