@@ -155,7 +155,7 @@ impl<'a> Sift<'a> {
                 make_kernel(g.sigma_inc[k], g.radius[k], &mut kernels[at..]);
             }
         }
-        descriptor::fill_weights(desc_weights);
+        descriptor::fill_weights(desc_weights, cfg.descriptor_grid);
         Ok(Sift {
             cfg,
             geo,
@@ -506,7 +506,7 @@ impl<'a> Sift<'a> {
         let count = if self.cfg.upright {
             1
         } else {
-            orientations(&lv, k, p.x, p.y, sigma, self.cfg.peak_ratio, &mut angles)
+            orientations(&lv, k, p.x, p.y, sigma, &self.cfg, &mut angles)
         };
         let scale = (1u32 << oct.index) as f32;
         let x = p.x * scale;
@@ -534,7 +534,17 @@ impl<'a> Sift<'a> {
             if let Admit::Slot(i) = admit(out, cap, self.cells, cell, p.response) {
                 if let Some((ks, ds)) = out.slot_mut(i) {
                     *ks = kp;
-                    descriptor::describe(&lv, k, p.x, p.y, sigma, angle, self.desc_weights, ds);
+                    descriptor::describe(
+                        &lv,
+                        self.cfg.descriptor_grid,
+                        k,
+                        p.x,
+                        p.y,
+                        sigma,
+                        angle,
+                        self.desc_weights,
+                        ds,
+                    );
                 }
             }
         }

@@ -4,6 +4,7 @@
 
 use core::f32::consts::PI;
 
+use super::config::SiftConfig;
 use super::fastmath::{atan2_pos, round_i};
 use super::levels::Levels;
 
@@ -20,7 +21,7 @@ pub fn orientations(
     x: f32,
     y: f32,
     sigma: f32,
-    peak_ratio: f32,
+    cfg: &SiftConfig,
     out: &mut [f32; ORI_BINS],
 ) -> usize {
     let mut hist = [0f32; ORI_BINS];
@@ -39,7 +40,11 @@ pub fn orientations(
     let r = radius as isize;
     // Large windows are sampled every other pixel: the level is blurred by sigma, so a
     // 2-pixel step above sigma 3 loses little and quarters the cost.
-    let step = if sigma >= 2.0 { 2 } else { 1 };
+    let step = if sigma >= cfg.orientation_stride_sigma {
+        2
+    } else {
+        1
+    };
     let mut samples = WindowRow::default();
     let soft = lv.soft_votes;
     for i in (-r..=r).step_by(step) {
@@ -107,7 +112,7 @@ pub fn orientations(
     if max.is_nan() || max <= 0.0 {
         return 0;
     }
-    let thr = max * peak_ratio;
+    let thr = max * cfg.peak_ratio;
     let mut n = 0;
     for j in 0..ORI_BINS {
         let l = smooth[(j + ORI_BINS - 1) % ORI_BINS];

@@ -54,11 +54,17 @@ pub struct Args {
     #[arg(long, default_value = "central")]
     pub gradient: String,
     /// Gradient operator in the fine octave.
-    #[arg(long, default_value = "scharr")]
+    #[arg(long, default_value = "central")]
     pub fine_gradient: String,
     /// Orientation votes split between the two nearest histogram bins.
     #[arg(long)]
     pub soft_orientation: bool,
+    /// Descriptor samples along each axis of the grid over bins -1..4 (multiple of 4, 4-20).
+    #[arg(long, default_value_t = 20)]
+    pub descriptor_grid: usize,
+    /// Orientation windows sampled every other pixel from this octave-relative scale up.
+    #[arg(long, default_value_t = 3.0)]
+    pub orientation_stride_sigma: f32,
     /// Extract this many times and report the median time.
     #[arg(long, default_value_t = 1)]
     pub repeat: usize,
@@ -124,6 +130,8 @@ impl Args {
             gradient: parse_gradient(&self.gradient)?,
             fine_gradient: parse_gradient(&self.fine_gradient)?,
             soft_orientation: self.soft_orientation,
+            descriptor_grid: self.descriptor_grid,
+            orientation_stride_sigma: self.orientation_stride_sigma,
             ..SiftConfig::default()
         })
     }
