@@ -31,9 +31,9 @@ STEREO_PAIR = "motorcycle/stereo"
 # input taken as unblurred (input sigma 0: 0.8 and 1.6 px added to the fine octave and
 # octave 0), strongest-first cap (no spreading grid), votes split between orientation
 # bins, an 8x8 descriptor grid (1.6 samples per bin) and orientation windows sampled every
-# other pixel from sigma 2.
+# other pixel from sigma 2, over a radius of 3 sigma (OpenCV: 4.5).
 BAR_ARGS = ("--fine-octave --input-sigma 0 --grid 1x1 --soft-orientation "
-            "--descriptor-grid 8 --orientation-stride-sigma 2")
+            "--descriptor-grid 8 --orientation-stride-sigma 2 --orientation-radius 3")
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 W, H = 640, 480
 

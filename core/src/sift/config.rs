@@ -77,6 +77,9 @@ pub struct SiftConfig {
     /// Orientation windows are sampled every other pixel from this octave-relative scale
     /// up (the level is blurred by sigma, so a 2-pixel step loses little).
     pub orientation_stride_sigma: f32,
+    /// Radius of the orientation window in keypoint sigmas (Lowe, OpenCV: 4.5, three
+    /// sigmas of the 1.5-sigma Gaussian weight); at most 4.5, which the rings are sized for.
+    pub orientation_radius: f32,
 }
 
 pub use super::levels::Gradient;
@@ -104,6 +107,7 @@ impl Default for SiftConfig {
             soft_orientation: false,
             descriptor_grid: DESC_GRID,
             orientation_stride_sigma: 3.0,
+            orientation_radius: 4.5,
         }
     }
 }
@@ -221,6 +225,11 @@ impl SiftConfig {
         }
         if !(self.orientation_stride_sigma.is_finite() && self.orientation_stride_sigma > 0.0) {
             return Err(SiftError::BadConfig("orientation_stride_sigma must be > 0"));
+        }
+        if !(self.orientation_radius >= 1.0 && self.orientation_radius <= 4.5) {
+            return Err(SiftError::BadConfig(
+                "orientation_radius must be in [1, 4.5]",
+            ));
         }
         if self.fine_octave && self.input_sigma >= self.sigma0 * 0.5 {
             return Err(SiftError::BadConfig(

@@ -27,7 +27,7 @@ pub fn orientations(
     let mut hist = [0f32; ORI_BINS];
     let px = round_i(x) as isize;
     let py = round_i(y) as isize;
-    let radius = (round_i(4.5 * sigma).max(0) as usize).min(MAX_RADIUS);
+    let radius = (round_i(cfg.orientation_radius * sigma).max(0) as usize).min(MAX_RADIUS);
     let sw = 1.5 * sigma;
     let e = -1.0 / (2.0 * sw * sw);
     // Separable Gaussian weights: exp(-(i^2 + j^2) / 2 sw^2) = g(i) g(j).

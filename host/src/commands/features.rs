@@ -65,6 +65,9 @@ pub struct Args {
     /// Orientation windows sampled every other pixel from this octave-relative scale up.
     #[arg(long, default_value_t = 3.0)]
     pub orientation_stride_sigma: f32,
+    /// Orientation window radius in keypoint sigmas (1-4.5).
+    #[arg(long, default_value_t = 4.5)]
+    pub orientation_radius: f32,
     /// Extract this many times and report the median time.
     #[arg(long, default_value_t = 1)]
     pub repeat: usize,
@@ -132,6 +135,7 @@ impl Args {
             soft_orientation: self.soft_orientation,
             descriptor_grid: self.descriptor_grid,
             orientation_stride_sigma: self.orientation_stride_sigma,
+            orientation_radius: self.orientation_radius,
             ..SiftConfig::default()
         })
     }
