@@ -27,6 +27,13 @@ import cv2
 import numpy as np
 
 STEREO_PAIR = "motorcycle/stereo"
+# The configuration measured against issue 3's bars (README.md): the fine octave with the
+# input taken as unblurred (input sigma 0: 0.8 and 1.6 px added to the fine octave and
+# octave 0), strongest-first cap (no spreading grid), votes split between orientation
+# bins, an 8x8 descriptor grid (1.6 samples per bin) and orientation windows sampled every
+# other pixel from sigma 2, over a radius of 3 sigma (OpenCV: 4.5).
+BAR_ARGS = ("--fine-octave --input-sigma 0 --grid 1x1 --soft-orientation "
+            "--descriptor-grid 8 --orientation-stride-sigma 2 --orientation-radius 3")
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 W, H = 640, 480
 
@@ -313,7 +320,9 @@ def main():
     ap.add_argument("--json", default=os.path.join(ROOT, "bench", "sift", "results.json"))
     ap.add_argument("--quick", action="store_true", help="one base image, four warps, no stereo")
     ap.add_argument("--bases", default="", help="comma-separated base image names (default: all)")
-    ap.add_argument("--ours-args", default="", help="extra arguments for `phototraverse features`")
+    ap.add_argument("--ours-args", default=BAR_ARGS,
+                    help=f"arguments for `phototraverse features` (default: the issue-3 configuration, {BAR_ARGS!r}; "
+                         "'' for the extractor's defaults)")
     args = ap.parse_args()
     if not os.path.isdir(args.data):
         print(f"data directory {args.data} is missing: nothing to benchmark", file=sys.stderr)

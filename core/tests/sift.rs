@@ -476,3 +476,85 @@ proptest! {
         }
     }
 }
+
+/// The configuration measured against issue 3's bars (bench/sift/README.md).
+fn bar_config(w: usize, h: usize) -> SiftConfig {
+    SiftConfig {
+        fine_octave: true,
+        input_sigma: 0.0,
+        grid_cols: 1,
+        grid_rows: 1,
+        soft_orientation: true,
+        descriptor_grid: 8,
+        orientation_stride_sigma: 2.0,
+        orientation_radius: 3.0,
+        max_keypoints: 3000,
+        ..cfg(w, h)
+    }
+}
+
+#[test]
+fn bar_configuration_is_deterministic_and_uses_the_predicted_memory() {
+    let img = texture(320, 240, 11);
+    let a = run(bar_config(320, 240), &img, 320, 240);
+    let b = run(bar_config(320, 240), &img, 320, 240);
+    let stats = a.result.unwrap();
+    assert_eq!(a.result, b.result);
+    assert!(stats.kept > 0);
+    assert_eq!(
+        bytemuck::cast_slice::<Keypoint, u8>(&a.keypoints),
+        bytemuck::cast_slice::<Keypoint, u8>(&b.keypoints)
+    );
+    assert_eq!(a.descriptors, b.descriptors);
+    // The arena holds what the budget predicts, under 6 bytes per pixel at 640x480.
+    assert!(a.working_used <= a.budget.total_of(ComponentKind::Working));
+    assert!(a.working_used + 64 >= a.budget.total_of(ComponentKind::Working));
+    assert!(a.total_used <= a.budget.total());
+    let mut vga = MemoryBudget::new();
+    bar_config(640, 480).budget(&mut vga).unwrap();
+    assert!(vga.total_of(ComponentKind::Working) as f64 / (640.0 * 480.0) <= 6.0);
+    // A sparser grid gives other descriptors than the default 20x20 one.
+    let dense = run(
+        SiftConfig {
+            descriptor_grid: 20,
+            ..bar_config(320, 240)
+        },
+        &img,
+        320,
+        240,
+    );
+    assert_eq!(
+        bytemuck::cast_slice::<Keypoint, u8>(&dense.keypoints),
+        bytemuck::cast_slice::<Keypoint, u8>(&a.keypoints)
+    );
+    assert_ne!(dense.descriptors, a.descriptors);
+}
+
+#[test]
+fn descriptor_grid_and_orientation_window_are_checked() {
+    for (grid, radius, stride, ok) in [
+        (8, 3.0, 2.0, true),
+        (4, 1.0, 0.5, true),
+        (20, 4.5, 3.0, true),
+        (0, 3.0, 2.0, false),
+        (6, 3.0, 2.0, false),
+        (24, 3.0, 2.0, false),
+        (8, 0.5, 2.0, false),
+        (8, 5.0, 2.0, false),
+        (8, f32::NAN, 2.0, false),
+        (8, 3.0, 0.0, false),
+        (8, 3.0, f32::INFINITY, false),
+    ] {
+        let c = SiftConfig {
+            descriptor_grid: grid,
+            orientation_radius: radius,
+            orientation_stride_sigma: stride,
+            ..cfg(64, 48)
+        };
+        assert_eq!(
+            c.validate().is_ok(),
+            ok,
+            "grid {grid} radius {radius} stride {stride}"
+        );
+    }
+}

@@ -104,3 +104,56 @@ fn refuses_a_missing_image() {
     assert!(!run.status.success());
     assert!(String::from_utf8_lossy(&run.stderr).contains("none.png"));
 }
+
+/// The flag set bench/sift runs against issue 3's bars: accepted, deterministic; a bad
+/// operator name or grid is refused with a message.
+#[test]
+fn issue3_flag_set_runs_deterministically_and_bad_values_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("img.png");
+    textured_png(&src, 160, 120);
+    let bar = [
+        "--fine-octave",
+        "--input-sigma",
+        "0",
+        "--grid",
+        "1x1",
+        "--soft-orientation",
+        "--descriptor-grid",
+        "8",
+        "--orientation-stride-sigma",
+        "2",
+        "--orientation-radius",
+        "3",
+    ];
+    let run = |out: &str, extra: &[&str]| {
+        let out = dir.path().join(out);
+        let r = Command::new(env!("CARGO_BIN_EXE_phototraverse"))
+            .args([
+                "features",
+                src.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .args(extra)
+            .output()
+            .unwrap();
+        (r, out)
+    };
+    let (a, fa) = run("a.txt", &bar);
+    assert!(a.status.success(), "{}", String::from_utf8_lossy(&a.stderr));
+    let (b, fb) = run("b.txt", &bar);
+    assert!(b.status.success());
+    let ta = std::fs::read_to_string(fa).unwrap();
+    assert!(ta.lines().count() > 5);
+    assert_eq!(ta, std::fs::read_to_string(fb).unwrap());
+    for bad in [
+        &["--gradient", "sobel"][..],
+        &["--fine-gradient", "x"][..],
+        &["--descriptor-grid", "10"][..],
+    ] {
+        let (r, _) = run("bad.txt", bad);
+        assert!(!r.status.success(), "{bad:?} accepted");
+        assert!(!r.stderr.is_empty());
+    }
+}

@@ -10,15 +10,14 @@ use super::pending::Pending;
 pub const MAX_LEVELS: usize = 8;
 /// Largest Gaussian kernel radius (taps on each side of the centre).
 pub const MAX_RADIUS: usize = 24;
-/// Descriptor samples per spatial bin along each axis (a fixed sampling grid).
-pub const DESC_SAMPLES_PER_BIN: usize = 4;
 /// Descriptor spatial bins along each axis.
 pub const DESC_BINS: usize = 4;
 /// Descriptor orientation bins.
 pub const DESC_ORI_BINS: usize = 8;
-/// Samples of the descriptor grid along one axis: the window covers bins -1..4 so
-/// trilinear interpolation spills into the outer bins as in Lowe's descriptor.
-pub const DESC_GRID: usize = (DESC_BINS + 1) * DESC_SAMPLES_PER_BIN;
+/// Most samples of the descriptor grid along one axis (buffers are sized for it). The
+/// grid spreads [`SiftConfig::descriptor_grid`] samples uniformly over bins -1..4
+/// (trilinear interpolation spills into the outer bins as in Lowe's descriptor).
+pub const DESC_GRID: usize = 20;
 /// Keypoints are not detected closer than this to the octave border.
 pub const BORDER: usize = 5;
 /// Rows the refinement may move plus the neighbour row it reads.
@@ -63,7 +62,27 @@ pub struct SiftConfig {
     /// octave 0: the fine scales OpenCV reaches by doubling the image, at a quarter of the
     /// cost of doubling. Requires `input_sigma < sigma0 / 2`.
     pub fine_octave: bool,
+    /// Gradient operator of orientations and descriptors in the regular octaves.
+    pub gradient: Gradient,
+    /// Gradient operator of orientations and descriptors in the fine octave, whose levels
+    /// are blurred by only 0.8-1.6 pixels, where central differences bend directions most.
+    pub fine_gradient: Gradient,
+    /// Orientation votes split between the two nearest histogram bins (instead of all to
+    /// the nearest, as Lowe and OpenCV): small keypoints have few samples in their window,
+    /// and rounding each vote makes the peak jump between bins.
+    pub soft_orientation: bool,
+    /// Descriptor samples along each axis of the grid over bins -1..4: a multiple of 4 in
+    /// 4..=20 (20: 4 samples per bin; 8: 1.6 per bin, 6x fewer samples).
+    pub descriptor_grid: usize,
+    /// Orientation windows are sampled every other pixel from this octave-relative scale
+    /// up (the level is blurred by sigma, so a 2-pixel step loses little).
+    pub orientation_stride_sigma: f32,
+    /// Radius of the orientation window in keypoint sigmas (Lowe, OpenCV: 4.5, three
+    /// sigmas of the 1.5-sigma Gaussian weight); at most 4.5, which the rings are sized for.
+    pub orientation_radius: f32,
 }
+
+pub use super::levels::Gradient;
 
 impl Default for SiftConfig {
     fn default() -> Self {
@@ -83,6 +102,12 @@ impl Default for SiftConfig {
             pending_capacity: 2048,
             peak_ratio: 0.8,
             fine_octave: false,
+            gradient: Gradient::Central,
+            fine_gradient: Gradient::Central,
+            soft_orientation: false,
+            descriptor_grid: DESC_GRID,
+            orientation_stride_sigma: 3.0,
+            orientation_radius: 4.5,
         }
     }
 }
@@ -189,6 +214,22 @@ impl SiftConfig {
         }
         if !(self.peak_ratio.is_finite() && self.peak_ratio > 0.0 && self.peak_ratio <= 1.0) {
             return Err(SiftError::BadConfig("peak_ratio must be in (0, 1]"));
+        }
+        if self.descriptor_grid < 4
+            || self.descriptor_grid > DESC_GRID
+            || !self.descriptor_grid.is_multiple_of(4)
+        {
+            return Err(SiftError::BadConfig(
+                "descriptor_grid must be a multiple of 4 in 4..=20",
+            ));
+        }
+        if !(self.orientation_stride_sigma.is_finite() && self.orientation_stride_sigma > 0.0) {
+            return Err(SiftError::BadConfig("orientation_stride_sigma must be > 0"));
+        }
+        if !(self.orientation_radius >= 1.0 && self.orientation_radius <= 4.5) {
+            return Err(SiftError::BadConfig(
+                "orientation_radius must be in [1, 4.5]",
+            ));
         }
         if self.fine_octave && self.input_sigma >= self.sigma0 * 0.5 {
             return Err(SiftError::BadConfig(

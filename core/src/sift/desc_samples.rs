@@ -11,6 +11,7 @@ use core::f32::consts::PI;
 
 use super::config::{DESC_BINS, DESC_GRID, DESC_ORI_BINS};
 use super::fastmath::{atan2_pos, floor_i, round_i};
+use super::levels::{central, farid, fits, scharr, Gradient};
 
 /// Padded histogram cells: positions -1..=D on both axes, orientations with a wrap slot.
 pub const P: usize = DESC_BINS + 2;
@@ -72,11 +73,12 @@ impl RowSamples {
         usin: &[f32; DESC_GRID],
         vsin: f32,
         vcos: f32,
+        n: usize,
     ) {
         #[cfg(target_arch = "x86_64")]
-        simd::place(self, f, ucos, usin, vsin, vcos);
+        simd::place(self, f, ucos, usin, vsin, vcos, n);
         #[cfg(not(target_arch = "x86_64"))]
-        self.place_scalar(f, ucos, usin, vsin, vcos);
+        self.place_scalar(f, ucos, usin, vsin, vcos, n);
     }
 
     /// The scalar definition of [`RowSamples::place`].
@@ -87,9 +89,10 @@ impl RowSamples {
         usin: &[f32; DESC_GRID],
         vsin: f32,
         vcos: f32,
+        n: usize,
     ) {
         let d = DESC_BINS as f32;
-        for j in 0..DESC_GRID {
+        for j in 0..lanes(n) {
             let pc = round_i(f.x + ucos[j] - vsin);
             let pr = round_i(f.y + usin[j] + vcos);
             let (ox, oy) = (pc as f32 - f.x, pr as f32 - f.y);
@@ -108,43 +111,72 @@ impl RowSamples {
     /// Gradients of the placed samples from the window's rows (`rows[i]` is image row
     /// `r_lo + i`), and their Gaussian weights. A sample whose neighbours fall outside the
     /// window keeps weight 0.
-    pub fn gradients(&mut self, rows: &[&[i16]], r_lo: isize, weights: &[f32]) {
-        let weights = weights.get(..DESC_GRID).unwrap_or(&[0.0; DESC_GRID]);
-        for (j, &weight) in weights.iter().enumerate() {
+    pub fn gradients(
+        &mut self,
+        rows: &[&[i16]],
+        r_lo: isize,
+        weights: &[f32],
+        op: Gradient,
+        n: usize,
+    ) {
+        let n = lanes(n);
+        // One loop per operator, so each is inlined into its own loop.
+        match op {
+            Gradient::Central => {
+                self.gradients_with(rows, r_lo, &weights[..n.min(weights.len())], 1, central)
+            }
+            Gradient::Scharr => {
+                self.gradients_with(rows, r_lo, &weights[..n.min(weights.len())], 1, scharr)
+            }
+            Gradient::Farid => {
+                self.gradients_with(rows, r_lo, &weights[..n.min(weights.len())], 2, farid)
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn gradients_with(
+        &mut self,
+        rows: &[&[i16]],
+        r_lo: isize,
+        weights: &[f32],
+        m: usize,
+        op: impl Fn(&[&[i16]], usize) -> (f32, f32),
+    ) {
+        for (j, &weight) in weights.iter().enumerate().take(DESC_GRID) {
             self.dx[j] = 0.0;
             self.dy[j] = 0.0;
             self.wgt[j] = 0.0;
             if self.ok[j] == 0 {
                 continue;
             }
-            let i = self.pr[j] as isize - 1 - r_lo;
-            let Some([up, row, down]) = (i >= 0)
-                .then(|| rows.get(i as usize..i as usize + 3))
+            let i = self.pr[j] as isize - m as isize - r_lo;
+            let Some(window) = (i >= 0)
+                .then(|| rows.get(i as usize..i as usize + 2 * m + 1))
                 .flatten()
             else {
                 continue;
             };
             let c = self.pc[j] as usize;
-            if c + 1 >= row.len() || c >= up.len() || c >= down.len() {
+            if !fits(window, c, m) {
                 continue;
             }
-            self.dx[j] = (row[c + 1] as i32 - row[c - 1] as i32) as f32;
-            self.dy[j] = (down[c] as i32 - up[c] as i32) as f32;
+            (self.dx[j], self.dy[j]) = op(window, c);
             self.wgt[j] = weight;
         }
     }
 
     /// Weighted magnitudes and orientation bins relative to `theta`.
-    pub fn magnitudes_and_bins(&mut self, theta: f32, obin_scale: f32) {
+    pub fn magnitudes_and_bins(&mut self, theta: f32, obin_scale: f32, n: usize) {
         #[cfg(target_arch = "x86_64")]
-        simd::magnitudes_and_bins(self, theta, obin_scale);
+        simd::magnitudes_and_bins(self, theta, obin_scale, n);
         #[cfg(not(target_arch = "x86_64"))]
-        self.magnitudes_and_bins_scalar(theta, obin_scale);
+        self.magnitudes_and_bins_scalar(theta, obin_scale, n);
     }
 
     /// The scalar definition of [`RowSamples::magnitudes_and_bins`].
-    pub fn magnitudes_and_bins_scalar(&mut self, theta: f32, obin_scale: f32) {
-        for j in 0..DESC_GRID {
+    pub fn magnitudes_and_bins_scalar(&mut self, theta: f32, obin_scale: f32, n: usize) {
+        for j in 0..lanes(n) {
             let (dx, dy) = (self.dx[j], self.dy[j]);
             self.mag[j] = libm::sqrtf(dx * dx + dy * dy) * self.wgt[j];
             let ori = atan2_pos(dy, dx) - theta;
@@ -163,10 +195,10 @@ impl RowSamples {
     }
 
     /// Trilinear distribution of the row's samples over the padded histogram.
-    pub fn scatter(&self, padded: &mut [f32; PADDED]) {
+    pub fn scatter(&self, padded: &mut [f32; PADDED], n: usize) {
         // The four cells of a sample: (r0, c0), (r0, c0 + 1), (r0 + 1, c0), (r0 + 1, c0 + 1).
         const SPAN: usize = (P + 1) * NO + 2;
-        for j in 0..DESC_GRID {
+        for j in 0..lanes(n) {
             let mag = self.mag[j];
             if mag == 0.0 {
                 continue;
@@ -194,10 +226,16 @@ impl RowSamples {
     }
 }
 
+/// Samples of a row of `n`: at most `DESC_GRID`, rounded down to whole vector lanes.
+#[inline]
+pub fn lanes(n: usize) -> usize {
+    n.min(DESC_GRID) & !3
+}
+
 #[cfg(target_arch = "x86_64")]
 mod simd {
     use super::super::fastmath::sse::{atan2_pos, clamp_epi32, floor_epi32, select};
-    use super::{Frame, RowSamples, DESC_BINS, DESC_GRID, DESC_ORI_BINS, PI};
+    use super::{lanes, Frame, RowSamples, DESC_BINS, DESC_GRID, DESC_ORI_BINS, PI};
     use core::arch::x86_64::*;
 
     // SAFETY (whole module): SSE2 is part of the x86_64 baseline; every load and store
@@ -211,6 +249,7 @@ mod simd {
         usin: &[f32; DESC_GRID],
         vsin: f32,
         vcos: f32,
+        n: usize,
     ) {
         unsafe {
             let (x, y) = (_mm_set1_ps(f.x), _mm_set1_ps(f.y));
@@ -221,7 +260,7 @@ mod simd {
             let (lo, d) = (_mm_set1_ps(-1.0), _mm_set1_ps(DESC_BINS as f32));
             let zero = _mm_setzero_si128();
             let (wm1, hm1) = (_mm_set1_epi32(f.w - 1), _mm_set1_epi32(f.h - 1));
-            for j in (0..DESC_GRID).step_by(4) {
+            for j in (0..lanes(n)).step_by(4) {
                 let uc = _mm_loadu_ps(ucos.as_ptr().add(j));
                 let us = _mm_loadu_ps(usin.as_ptr().add(j));
                 let sx = _mm_sub_ps(_mm_add_ps(x, uc), vs);
@@ -257,13 +296,13 @@ mod simd {
         }
     }
 
-    pub fn magnitudes_and_bins(s: &mut RowSamples, theta: f32, obin_scale: f32) {
+    pub fn magnitudes_and_bins(s: &mut RowSamples, theta: f32, obin_scale: f32, n: usize) {
         unsafe {
             let th = _mm_set1_ps(theta);
             let scale = _mm_set1_ps(obin_scale);
             let two_pi = _mm_set1_ps(2.0 * PI);
             let zero = _mm_setzero_ps();
-            for j in (0..DESC_GRID).step_by(4) {
+            for j in (0..lanes(n)).step_by(4) {
                 let dx = _mm_loadu_ps(s.dx.as_ptr().add(j));
                 let dy = _mm_loadu_ps(s.dy.as_ptr().add(j));
                 let w = _mm_loadu_ps(s.wgt.as_ptr().add(j));
@@ -340,8 +379,8 @@ mod tests {
             );
             let mut a = RowSamples::default();
             let mut b = RowSamples::default();
-            a.place(&f, &ucos, &usin, vsin, vcos);
-            b.place_scalar(&f, &ucos, &usin, vsin, vcos);
+            a.place(&f, &ucos, &usin, vsin, vcos, DESC_GRID);
+            b.place_scalar(&f, &ucos, &usin, vsin, vcos, DESC_GRID);
             assert_eq!((a.pc, a.pr, a.ok), (b.pc, b.pr, b.ok));
             assert_eq!(a.cbin.map(f32::to_bits), b.cbin.map(f32::to_bits));
             assert_eq!(a.rbin.map(f32::to_bits), b.rbin.map(f32::to_bits));
@@ -361,8 +400,8 @@ mod tests {
             b.dx = a.dx;
             b.dy = a.dy;
             b.wgt = a.wgt;
-            a.magnitudes_and_bins(theta, 8.0 / (2.0 * PI));
-            b.magnitudes_and_bins_scalar(theta, 8.0 / (2.0 * PI));
+            a.magnitudes_and_bins(theta, 8.0 / (2.0 * PI), DESC_GRID);
+            b.magnitudes_and_bins_scalar(theta, 8.0 / (2.0 * PI), DESC_GRID);
             assert_eq!(a.mag.map(f32::to_bits), b.mag.map(f32::to_bits));
             assert_eq!(a.obin.map(f32::to_bits), b.obin.map(f32::to_bits));
             for j in 0..DESC_GRID {

@@ -9,7 +9,7 @@
 
 use core::f32::consts::PI;
 
-use super::config::{DESC_BINS, DESC_GRID, DESC_ORI_BINS, DESC_SAMPLES_PER_BIN};
+use super::config::{DESC_BINS, DESC_GRID, DESC_ORI_BINS};
 use super::desc_samples::{Frame, RowSamples, NO, P, PADDED};
 use super::fastmath::{floor_i, round_i};
 use super::levels::Levels;
@@ -19,31 +19,35 @@ use crate::features::Descriptor;
 const MAX_ROWS: usize = 192;
 
 /// Gaussian weights of the sampling grid (sigma = half the descriptor width, as Lowe).
-pub fn fill_weights(weights: &mut [f32]) {
+/// for a grid of `n` x `n` samples (row stride `n`).
+pub fn fill_weights(weights: &mut [f32], n: usize) {
     let half = DESC_BINS as f32 * 0.5;
     let e = -1.0 / (2.0 * half * half);
-    for i in 0..DESC_GRID {
-        for j in 0..DESC_GRID {
-            let u = grid_bin(j) - half + 0.5;
-            let v = grid_bin(i) - half + 0.5;
-            if let Some(w) = weights.get_mut(i * DESC_GRID + j) {
+    for i in 0..n {
+        for j in 0..n {
+            let u = grid_bin(j, n) - half + 0.5;
+            let v = grid_bin(i, n) - half + 0.5;
+            if let Some(w) = weights.get_mut(i * n + j) {
                 *w = libm::expf((u * u + v * v) * e);
             }
         }
     }
 }
 
-/// Bin coordinate of grid sample `i`: uniform over (-1, DESC_BINS).
+/// Bin coordinate of sample `i` of a grid of `n`: uniform over (-1, DESC_BINS).
 #[inline]
-fn grid_bin(i: usize) -> f32 {
-    -1.0 + (i as f32 + 0.5) / DESC_SAMPLES_PER_BIN as f32
+fn grid_bin(i: usize, n: usize) -> f32 {
+    -1.0 + (i as f32 + 0.5) * ((DESC_BINS + 1) as f32 / n as f32)
 }
 
 /// Computes the descriptor of a keypoint at octave position (`x`, `y`), octave-relative
-/// scale `sigma`, orientation `theta` (radians), on Gaussian level `k`.
+/// scale `sigma`, orientation `theta` (radians), on Gaussian level `k`, sampling a grid of
+/// `grid` x `grid` (a multiple of 4, at most `DESC_GRID`) with `weights` from
+/// [`fill_weights`].
 #[allow(clippy::too_many_arguments)]
 pub fn describe(
     lv: &Levels,
+    grid: usize,
     k: usize,
     x: f32,
     y: f32,
@@ -72,8 +76,9 @@ pub fn describe(
     let half = D as f32 * 0.5 - 0.5;
     let mut ucos = [0f32; DESC_GRID];
     let mut usin = [0f32; DESC_GRID];
-    for j in 0..DESC_GRID {
-        let b = grid_bin(j);
+    let n = grid.min(DESC_GRID) & !3;
+    for j in 0..n {
+        let b = grid_bin(j, n);
         let u = (b - D as f32 * 0.5 + 0.5) * hw;
         ucos[j] = u * cos_t;
         usin[j] = u * sin_t;
@@ -93,15 +98,13 @@ pub fn describe(
         h: h as i32,
     };
     let mut row = RowSamples::default();
-    for i in 0..DESC_GRID {
+    for i in 0..n {
         // The grid is square: row i has v = u_i, so v sin = usin[i] and v cos = ucos[i].
-        row.place(&frame, &ucos, &usin, usin[i], ucos[i]);
-        let wrow = weights
-            .get(i * DESC_GRID..(i + 1) * DESC_GRID)
-            .unwrap_or(&[]);
-        row.gradients(&rows[..n_rows], r_lo, wrow);
-        row.magnitudes_and_bins(theta, obin_scale);
-        row.scatter(&mut padded);
+        row.place(&frame, &ucos, &usin, usin[i], ucos[i], n);
+        let wrow = weights.get(i * n..(i + 1) * n).unwrap_or(&[]);
+        row.gradients(&rows[..n_rows], r_lo, wrow, lv.gradient, n);
+        row.magnitudes_and_bins(theta, obin_scale, n);
+        row.scatter(&mut padded, n);
     }
     // Fold the wrapped orientation slot and drop the outer spatial ring.
     for r in 0..D {

@@ -43,7 +43,7 @@ pub mod pending;
 pub mod scale_space;
 pub mod select;
 
-pub use config::{Geometry, SiftConfig, SiftError};
+pub use config::{Geometry, Gradient, SiftConfig, SiftError};
 
 use crate::budget::Arena;
 use crate::features::{FeatureSet, Keypoint};
@@ -155,7 +155,7 @@ impl<'a> Sift<'a> {
                 make_kernel(g.sigma_inc[k], g.radius[k], &mut kernels[at..]);
             }
         }
-        descriptor::fill_weights(desc_weights);
+        descriptor::fill_weights(desc_weights, cfg.descriptor_grid);
         Ok(Sift {
             cfg,
             geo,
@@ -180,6 +180,14 @@ impl<'a> Sift<'a> {
 
     pub fn geometry(&self) -> &Geometry {
         &self.geo
+    }
+
+    fn gradient(&self, oct: &Octave) -> Gradient {
+        if oct.fine {
+            self.cfg.fine_gradient
+        } else {
+            self.cfg.gradient
+        }
     }
 
     fn geometry_of(&self, oct: &Octave) -> &Geometry {
@@ -397,6 +405,7 @@ impl<'a> Sift<'a> {
     ) {
         let stride = self.cfg.max_width;
         let w = oct.w;
+        let gradient = self.gradient(oct);
         let dog = &*self.dog;
         let lv = Levels {
             data: self.grings,
@@ -404,6 +413,8 @@ impl<'a> Sift<'a> {
             w,
             h: oct.h,
             geo: if oct.fine { &self.fine } else { &self.geo },
+            gradient,
+            soft_votes: self.cfg.soft_orientation,
         };
         for l in 1..=self.cfg.levels {
             let row = |layer: usize, rr: usize| {
@@ -474,12 +485,15 @@ impl<'a> Sift<'a> {
         out: &mut FeatureSet,
         stats: &mut SiftStats,
     ) {
+        let gradient = self.gradient(oct);
         let lv = Levels {
             data: self.grings,
             stride: self.cfg.max_width,
             w: oct.w,
             h: oct.h,
             geo: if oct.fine { &self.fine } else { &self.geo },
+            gradient,
+            soft_votes: self.cfg.soft_orientation,
         };
         let k = (p.level as usize).clamp(1, self.cfg.levels);
         let sigma0 = if oct.fine {
@@ -492,7 +506,7 @@ impl<'a> Sift<'a> {
         let count = if self.cfg.upright {
             1
         } else {
-            orientations(&lv, k, p.x, p.y, sigma, self.cfg.peak_ratio, &mut angles)
+            orientations(&lv, k, p.x, p.y, sigma, &self.cfg, &mut angles)
         };
         let scale = (1u32 << oct.index) as f32;
         let x = p.x * scale;
@@ -520,7 +534,17 @@ impl<'a> Sift<'a> {
             if let Admit::Slot(i) = admit(out, cap, self.cells, cell, p.response) {
                 if let Some((ks, ds)) = out.slot_mut(i) {
                     *ks = kp;
-                    descriptor::describe(&lv, k, p.x, p.y, sigma, angle, self.desc_weights, ds);
+                    descriptor::describe(
+                        &lv,
+                        self.cfg.descriptor_grid,
+                        k,
+                        p.x,
+                        p.y,
+                        sigma,
+                        angle,
+                        self.desc_weights,
+                        ds,
+                    );
                 }
             }
         }

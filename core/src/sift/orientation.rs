@@ -4,6 +4,7 @@
 
 use core::f32::consts::PI;
 
+use super::config::SiftConfig;
 use super::fastmath::{atan2_pos, round_i};
 use super::levels::Levels;
 
@@ -20,13 +21,13 @@ pub fn orientations(
     x: f32,
     y: f32,
     sigma: f32,
-    peak_ratio: f32,
+    cfg: &SiftConfig,
     out: &mut [f32; ORI_BINS],
 ) -> usize {
     let mut hist = [0f32; ORI_BINS];
     let px = round_i(x) as isize;
     let py = round_i(y) as isize;
-    let radius = (round_i(4.5 * sigma).max(0) as usize).min(MAX_RADIUS);
+    let radius = (round_i(cfg.orientation_radius * sigma).max(0) as usize).min(MAX_RADIUS);
     let sw = 1.5 * sigma;
     let e = -1.0 / (2.0 * sw * sw);
     // Separable Gaussian weights: exp(-(i^2 + j^2) / 2 sw^2) = g(i) g(j).
@@ -39,40 +40,63 @@ pub fn orientations(
     let r = radius as isize;
     // Large windows are sampled every other pixel: the level is blurred by sigma, so a
     // 2-pixel step above sigma 3 loses little and quarters the cost.
-    let step = if sigma >= 3.0 { 2 } else { 1 };
+    let step = if sigma >= cfg.orientation_stride_sigma {
+        2
+    } else {
+        1
+    };
     let mut samples = WindowRow::default();
+    let soft = lv.soft_votes;
     for i in (-r..=r).step_by(step) {
         let yy = py + i;
         if yy <= 0 || yy >= h - 1 {
             continue;
         }
-        let up = lv.row(k, yy - 1);
-        let row = lv.row(k, yy);
-        let down = lv.row(k, yy + 1);
+        let m = lv.gradient.reach() as isize;
+        if yy < m || yy >= h - m {
+            continue;
+        }
+        let rows: [&[i16]; 5] = core::array::from_fn(|j| lv.row(k, yy + j as isize - 2));
         let gi = g[i.unsigned_abs()];
         // Keep the column phase of the window so sampling stays symmetric about px.
         let mut c0 = px - r;
-        while c0 < 1 {
+        while c0 < m {
             c0 += step as isize;
         }
-        let c1 = (px + r).min(w - 2);
+        let c1 = (px + r).min(w - 1 - m);
         let mut n = 0;
         for xx in (c0..=c1).step_by(step) {
-            let c = xx as usize;
-            if c + 1 >= row.len() || c >= up.len() || c >= down.len() || n >= WINDOW {
+            if n >= WINDOW {
                 break;
             }
-            samples.dx[n] = (row[c + 1] as i32 - row[c - 1] as i32) as f32;
-            samples.dy[n] = (down[c] as i32 - up[c] as i32) as f32;
+            let Some((dx, dy)) = lv.gradient.at(&rows, xx as usize) else {
+                break;
+            };
+            (samples.dx[n], samples.dy[n]) = (dx, dy);
             samples.wgt[n] = gi * g[(xx - px).unsigned_abs()];
             n += 1;
         }
         samples.bins(n, scale);
-        for j in 0..n {
-            let bin = samples.bin[j].max(0) as usize;
-            let bin = if bin >= ORI_BINS { bin - ORI_BINS } else { bin };
-            if let Some(b) = hist.get_mut(bin) {
-                *b += samples.vote[j];
+        if soft {
+            // Each vote split between the two nearest bin centres: on a fine level the
+            // window holds few samples, and rounding each to one bin makes the peak jump.
+            for j in 0..n {
+                let p = samples.pos[j];
+                let b0 = libm::floorf(p);
+                let f = p - b0;
+                let b0 = (b0.max(0.0) as usize) % ORI_BINS;
+                let b1 = if b0 + 1 == ORI_BINS { 0 } else { b0 + 1 };
+                let v = samples.vote[j];
+                hist[b0] += v * (1.0 - f);
+                hist[b1] += v * f;
+            }
+        } else {
+            for j in 0..n {
+                let bin = samples.bin[j].max(0) as usize;
+                let bin = if bin >= ORI_BINS { bin - ORI_BINS } else { bin };
+                if let Some(b) = hist.get_mut(bin) {
+                    *b += samples.vote[j];
+                }
             }
         }
     }
@@ -88,7 +112,7 @@ pub fn orientations(
     if max.is_nan() || max <= 0.0 {
         return 0;
     }
-    let thr = max * peak_ratio;
+    let thr = max * cfg.peak_ratio;
     let mut n = 0;
     for j in 0..ORI_BINS {
         let l = smooth[(j + ORI_BINS - 1) % ORI_BINS];
@@ -129,6 +153,8 @@ struct WindowRow {
     dy: [f32; WINDOW],
     wgt: [f32; WINDOW],
     vote: [f32; WINDOW],
+    /// Continuous bin position `atan2 * bins / 2 pi`, in `[0, ORI_BINS]`.
+    pos: [f32; WINDOW],
     bin: [i32; WINDOW],
 }
 
@@ -153,7 +179,8 @@ impl WindowRow {
         for j in from..n.min(WINDOW) {
             let (dx, dy) = (self.dx[j], self.dy[j]);
             self.vote[j] = self.wgt[j] * libm::sqrtf(dx * dx + dy * dy);
-            self.bin[j] = round_i(atan2_pos(dy, dx) * scale);
+            self.pos[j] = atan2_pos(dy, dx) * scale;
+            self.bin[j] = round_i(self.pos[j]);
         }
     }
 
@@ -174,7 +201,9 @@ impl WindowRow {
                 let w = _mm_loadu_ps(self.wgt.as_ptr().add(j));
                 let m = _mm_sqrt_ps(_mm_add_ps(_mm_mul_ps(dx, dx), _mm_mul_ps(dy, dy)));
                 _mm_storeu_ps(self.vote.as_mut_ptr().add(j), _mm_mul_ps(w, m));
-                let b = floor_epi32(_mm_add_ps(_mm_mul_ps(atan2_pos(dy, dx), s), half));
+                let p = _mm_mul_ps(atan2_pos(dy, dx), s);
+                _mm_storeu_ps(self.pos.as_mut_ptr().add(j), p);
+                let b = floor_epi32(_mm_add_ps(p, half));
                 _mm_storeu_si128(self.bin.as_mut_ptr().add(j) as *mut __m128i, b);
             }
         }
@@ -211,6 +240,7 @@ mod tests {
             for j in 0..n {
                 assert_eq!(a.vote[j].to_bits(), b.vote[j].to_bits(), "n {n} sample {j}");
                 assert_eq!(a.bin[j], b.bin[j], "n {n} sample {j}");
+                assert_eq!(a.pos[j].to_bits(), b.pos[j].to_bits(), "n {n} sample {j}");
             }
         }
     }

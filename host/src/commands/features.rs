@@ -9,7 +9,7 @@ use anyhow::{bail, Context};
 use phototraverse_core::budget::{Arena, ComponentKind, MemoryBudget};
 use phototraverse_core::features::FeatureSet;
 use phototraverse_core::image::ImageView;
-use phototraverse_core::sift::{Sift, SiftConfig, SiftStats};
+use phototraverse_core::sift::{Gradient, Sift, SiftConfig, SiftStats};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -33,6 +33,12 @@ pub struct Args {
     /// Edge threshold (ratio of principal curvatures).
     #[arg(long, default_value_t = 10.0)]
     pub edge: f32,
+    /// Blur of the first level of each octave (octave pixels).
+    #[arg(long, default_value_t = 1.6)]
+    pub sigma0: f32,
+    /// Blur assumed in the input image (pixels).
+    #[arg(long, default_value_t = 0.5)]
+    pub input_sigma: f32,
     /// Spreading grid as COLSxROWS.
     #[arg(long, default_value = "8x6")]
     pub grid: String,
@@ -43,6 +49,25 @@ pub struct Args {
     /// small scales, like OpenCV's doubled first octave, at about 2-3x the time.
     #[arg(long)]
     pub fine_octave: bool,
+    /// Gradient operator of orientations and descriptors in the regular octaves:
+    /// central, scharr or farid.
+    #[arg(long, default_value = "central")]
+    pub gradient: String,
+    /// Gradient operator in the fine octave.
+    #[arg(long, default_value = "central")]
+    pub fine_gradient: String,
+    /// Orientation votes split between the two nearest histogram bins.
+    #[arg(long)]
+    pub soft_orientation: bool,
+    /// Descriptor samples along each axis of the grid over bins -1..4 (multiple of 4, 4-20).
+    #[arg(long, default_value_t = 20)]
+    pub descriptor_grid: usize,
+    /// Orientation windows sampled every other pixel from this octave-relative scale up.
+    #[arg(long, default_value_t = 3.0)]
+    pub orientation_stride_sigma: f32,
+    /// Orientation window radius in keypoint sigmas (1-4.5).
+    #[arg(long, default_value_t = 4.5)]
+    pub orientation_radius: f32,
     /// Extract this many times and report the median time.
     #[arg(long, default_value_t = 1)]
     pub repeat: usize,
@@ -71,6 +96,16 @@ pub fn load_gray(path: &Path) -> anyhow::Result<(Vec<u8>, usize, usize)> {
     Ok((gray.into_raw(), w, h))
 }
 
+/// Parses a gradient operator name.
+pub fn parse_gradient(s: &str) -> anyhow::Result<Gradient> {
+    Ok(match s {
+        "central" => Gradient::Central,
+        "scharr" => Gradient::Scharr,
+        "farid" => Gradient::Farid,
+        other => bail!("gradient must be central, scharr or farid, not {other}"),
+    })
+}
+
 /// Parses `COLSxROWS`.
 pub fn parse_grid(s: &str) -> anyhow::Result<(usize, usize)> {
     let (a, b) = s.split_once(['x', 'X']).context("grid must be COLSxROWS")?;
@@ -88,11 +123,19 @@ impl Args {
             levels: self.levels,
             contrast_threshold: self.contrast,
             edge_threshold: self.edge,
+            sigma0: self.sigma0,
+            input_sigma: self.input_sigma,
             max_keypoints: self.max_keypoints,
             grid_cols,
             grid_rows,
             upright: self.upright,
             fine_octave: self.fine_octave,
+            gradient: parse_gradient(&self.gradient)?,
+            fine_gradient: parse_gradient(&self.fine_gradient)?,
+            soft_orientation: self.soft_orientation,
+            descriptor_grid: self.descriptor_grid,
+            orientation_stride_sigma: self.orientation_stride_sigma,
+            orientation_radius: self.orientation_radius,
             ..SiftConfig::default()
         })
     }
