@@ -90,7 +90,8 @@ pub fn traverse_config(c: &Configure) -> Result<TraverseConfig, BuildError> {
     cfg.matching.max_tracks = (p.track_capacity as usize).max(1);
     // The mode's own settings (seed window lengths included) come last, then the
     // capacities that follow from the window.
-    let mut cfg = cfg.with_mode(t.mode).with_rig_estimation(t.estimate_rig);
+    // A seed mode's window length wins over the rig estimation's minimum.
+    let mut cfg = cfg.with_rig_estimation(t.estimate_rig).with_mode(t.mode);
     cfg.fit_capacities();
     Ok(cfg)
 }

@@ -417,7 +417,9 @@ impl TraverseConfig {
     /// - `Seed2006`: window 7 (bases), `Robust::None`, base-length sigma
     ///   sqrt(0.001) m, velocity-change sigma sqrt(0.5) m/s, at most 20 iterations.
     ///
-    /// `estimate_rig` is orthogonal to the mode and left as it is.
+    /// `estimate_rig` is orthogonal to the mode and left as it is; a seed mode's window
+    /// replaces the longer one [`TraverseConfig::with_rig_estimation`] sets, so apply
+    /// the mode after it.
     pub fn with_mode(mut self, mode: TraverseMode) -> Self {
         let a = &mut self.adjust;
         match mode {
