@@ -1,8 +1,23 @@
 //! End to end: `phototraverse features IMAGE --out FILE` writes COLMAP's text format.
 
-use std::process::Command;
+use std::path::Path;
+use std::process::{Command, Output};
 
-fn textured_png(path: &std::path::Path, w: u32, h: u32) {
+/// `phototraverse features SRC --out OUT EXTRA...`.
+fn features(src: &Path, out: &Path, extra: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_phototraverse"))
+        .args([
+            "features",
+            src.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .args(extra)
+        .output()
+        .unwrap()
+}
+
+fn textured_png(path: &Path, w: u32, h: u32) {
     let img = image::GrayImage::from_fn(w, h, |x, y| {
         let (fx, fy) = (x as f32, y as f32);
         let v = 128.0
@@ -21,17 +36,7 @@ fn writes_colmap_text_features() {
     let out = dir.path().join("img.txt");
     let (w, h) = (160u32, 120u32);
     textured_png(&src, w, h);
-    let run = Command::new(env!("CARGO_BIN_EXE_phototraverse"))
-        .args([
-            "features",
-            src.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--max-keypoints",
-            "50",
-        ])
-        .output()
-        .unwrap();
+    let run = features(&src, &out, &["--max-keypoints", "50"]);
     assert!(
         run.status.success(),
         "{}",
@@ -74,17 +79,7 @@ fn writes_colmap_text_features() {
     assert_eq!(count, n);
     // The same image gives the same file.
     let out2 = dir.path().join("again.txt");
-    let run2 = Command::new(env!("CARGO_BIN_EXE_phototraverse"))
-        .args([
-            "features",
-            src.to_str().unwrap(),
-            "--out",
-            out2.to_str().unwrap(),
-            "--max-keypoints",
-            "50",
-        ])
-        .output()
-        .unwrap();
+    let run2 = features(&src, &out2, &["--max-keypoints", "50"]);
     assert!(run2.status.success());
     assert_eq!(text, std::fs::read_to_string(&out2).unwrap());
 }
@@ -92,15 +87,7 @@ fn writes_colmap_text_features() {
 #[test]
 fn refuses_a_missing_image() {
     let dir = tempfile::tempdir().unwrap();
-    let run = Command::new(env!("CARGO_BIN_EXE_phototraverse"))
-        .args([
-            "features",
-            dir.path().join("none.png").to_str().unwrap(),
-            "--out",
-            dir.path().join("o.txt").to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
+    let run = features(&dir.path().join("none.png"), &dir.path().join("o.txt"), &[]);
     assert!(!run.status.success());
     assert!(String::from_utf8_lossy(&run.stderr).contains("none.png"));
 }
@@ -128,17 +115,7 @@ fn issue3_flag_set_runs_deterministically_and_bad_values_are_refused() {
     ];
     let run = |out: &str, extra: &[&str]| {
         let out = dir.path().join(out);
-        let r = Command::new(env!("CARGO_BIN_EXE_phototraverse"))
-            .args([
-                "features",
-                src.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-            ])
-            .args(extra)
-            .output()
-            .unwrap();
-        (r, out)
+        (features(&src, &out, extra), out)
     };
     let (a, fa) = run("a.txt", &bar);
     assert!(a.status.success(), "{}", String::from_utf8_lossy(&a.stderr));

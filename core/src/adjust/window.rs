@@ -1479,10 +1479,31 @@ impl<'a> Window<'a> {
         }
     }
 
+    /// A prior with full information `info` on the six parameters of camera block
+    /// `block` whose residual (prior - estimate) is `r`: added to the reduced system
+    /// when `normal`; returns its `vTPv`.
+    fn block_prior(&mut self, normal: bool, block: usize, r: &[f64; 6], info: &[f64; 36]) -> f64 {
+        let nc = self.n_cam();
+        let mut cost = 0.0;
+        for i in 0..6 {
+            let mut ir = 0.0;
+            for j in 0..6 {
+                ir += info[i * 6 + j] * r[j];
+                if normal {
+                    self.reduced[(6 * block + i) * nc + 6 * block + j] += info[i * 6 + j];
+                }
+            }
+            cost += r[i] * ir;
+            if normal {
+                self.rhs[6 * block + i] -= ir;
+            }
+        }
+        cost
+    }
+
     /// Adds the camera constraints to the reduced system (when `normal`) and
     /// returns their `vTPv` and equation count.
     fn add_constraints(&mut self, normal: bool) -> (f64, usize) {
-        let nc = self.n_cam();
         let mut cost = 0.0;
         let mut count = 0;
         let s = self.cfg.sigmas;
@@ -1494,36 +1515,12 @@ impl<'a> Window<'a> {
             }
             let r = prior_residual(&ep.params, &ep.prior);
             count += 6;
-            for i in 0..6 {
-                let mut ir = 0.0;
-                for j in 0..6 {
-                    ir += ep.prior_info[i * 6 + j] * r[j];
-                    if normal {
-                        self.reduced[(6 * e + i) * nc + 6 * e + j] += ep.prior_info[i * 6 + j];
-                    }
-                }
-                cost += r[i] * ir;
-                if normal {
-                    self.rhs[6 * e + i] -= ir;
-                }
-            }
+            cost += self.block_prior(normal, e, &r, &ep.prior_info);
         }
         if let Some(rb) = self.rig_block() {
             let r = prior_residual(&self.rig.to_array(), &self.rig_prior.to_array());
             let info = self.rig_prior_info;
-            for i in 0..6 {
-                let mut ir = 0.0;
-                for j in 0..6 {
-                    ir += info[i * 6 + j] * r[j];
-                    if normal {
-                        self.reduced[(6 * rb + i) * nc + 6 * rb + j] += info[i * 6 + j];
-                    }
-                }
-                cost += r[i] * ir;
-                if normal {
-                    self.rhs[6 * rb + i] -= ir;
-                }
-            }
+            cost += self.block_prior(normal, rb, &r, &info);
             count += 6;
             if s.base_length_m > 0.0 {
                 let (e, g) = base_length(&self.rig.base, self.nominal_base);
@@ -1540,19 +1537,7 @@ impl<'a> Window<'a> {
         if let Some(ib) = self.interior_block() {
             let r = prior_residual(&self.interior, &self.interior_prior);
             let info = self.interior_prior_info;
-            for i in 0..6 {
-                let mut ir = 0.0;
-                for j in 0..6 {
-                    ir += info[i * 6 + j] * r[j];
-                    if normal {
-                        self.reduced[(6 * ib + i) * nc + 6 * ib + j] += info[i * 6 + j];
-                    }
-                }
-                cost += r[i] * ir;
-                if normal {
-                    self.rhs[6 * ib + i] -= ir;
-                }
-            }
+            cost += self.block_prior(normal, ib, &r, &info);
             count += 6;
         }
         for e in 0..self.n_epochs {

@@ -111,12 +111,7 @@ pub fn refine_scaled(
                 cross += s * zt[v * n + u];
             }
         }
-        let var = sum2 - sum * sum / cnt;
-        *sc = if var > 1e-3 * cnt {
-            cross / libm::sqrtf(var * tnorm)
-        } else {
-            -1.0
-        };
+        *sc = ncc(sum, sum2, cross, cnt, tnorm);
     }
     let peak = score[4];
     if peak < min_ncc {
@@ -128,6 +123,18 @@ pub fn refine_scaled(
     let dx = parabola(score[3], peak, score[5]);
     let dy = parabola(score[1], peak, score[7]);
     Ok(([centre[0] + dx, centre[1] + dy], peak))
+}
+
+/// NCC of a window (its sum, sum of squares and cross product with the zero-mean
+/// template of squared norm `tnorm`, over `cnt` samples); -1 for a flat window.
+#[inline]
+fn ncc(sum: f32, sum2: f32, cross: f32, cnt: f32, tnorm: f32) -> f32 {
+    let var = sum2 - sum * sum / cnt;
+    if var > 1e-3 * cnt {
+        cross / libm::sqrtf(var * tnorm)
+    } else {
+        -1.0
+    }
 }
 
 /// Zero-mean copy of the `n x n` template and its squared norm; `None` when flat.
@@ -272,12 +279,7 @@ pub fn correlate(
                     cross += s * z;
                 }
             }
-            let var = sum2 - sum * sum / cnt;
-            let ncc = if var > 1e-3 * cnt {
-                cross / libm::sqrtf(var * tnorm)
-            } else {
-                -1.0
-            };
+            let ncc = ncc(sum, sum2, cross, cnt, tnorm);
             score[oy * S + ox] = ncc;
             if ncc > best.2 {
                 best = (ox, oy, ncc);

@@ -73,11 +73,18 @@ impl Traverse<'_> {
         let cur = [*initial, self.right_of(initial)];
         // Descriptor and area tie points share the epoch's tie point capacity, which
         // sizes the window (TraverseConfig::fit_capacities).
-        let taken = self.matcher.tie_points().count();
-        let room = self
-            .area
-            .len()
-            .min(self.cfg.matching.max_tie_points.saturating_sub(taken));
+        let descriptor_ties = self.matcher.tie_points().count();
+        let room = self.area.len().min(
+            self.cfg
+                .matching
+                .max_tie_points
+                .saturating_sub(descriptor_ties),
+        );
+        let r = if resected {
+            SEARCH_PX
+        } else {
+            SEARCH_PREDICTED_PX
+        };
         let mut tpl = [0f32; TEMPLATE_LEN];
         for i in 0..patches.len() {
             if self.n_area >= room {
@@ -95,22 +102,16 @@ impl Traverse<'_> {
             if !patches.template(i, &mut tpl) {
                 continue;
             }
-            let r = if resected {
-                SEARCH_PX
-            } else {
-                SEARCH_PREDICTED_PX
-            };
-            let search = (r, r);
-            let Ok((l, _)) = correlate(&tpl, patches.half(), left, pl, search, rcfg.min_ncc) else {
+            let Ok((l, _)) = correlate(&tpl, patches.half(), left, pl, (r, r), rcfg.min_ncc) else {
                 continue;
             };
             let l = rescaled(&tpl, patches.half(), left, (pl, l), scale, rcfg.min_ncc);
-            let Ok((r, _)) = refine_checked(left, right, l, pr, &rcfg) else {
+            let Ok((right_px, _)) = refine_checked(left, right, l, pr, &rcfg) else {
                 continue;
             };
-            let taken = self.matcher.tie_points().any(|t| near(t.cur.left, l))
+            let duplicate = self.matcher.tie_points().any(|t| near(t.cur.left, l))
                 || self.area[..self.n_area].iter().any(|a| near(a.left, l));
-            if taken {
+            if duplicate {
                 continue;
             }
             self.area[self.n_area] = AreaTie {
@@ -118,7 +119,7 @@ impl Traverse<'_> {
                 tag: info.tag,
                 point: info.point,
                 left: l,
-                right: r,
+                right: right_px,
             };
             self.n_area += 1;
         }

@@ -274,13 +274,6 @@ impl<'a> Traverse<'a> {
         (self.window.rig(), self.window.rig_std())
     }
 
-    /// The interior orientation corrections of the self-calibration `[x0_L, y0_L, f_L,
-    /// x0_R, y0_R, f_R]` (mm, added to the calibration) and their standard deviations;
-    /// zero when the interior is fixed.
-    pub fn interior_estimate(&self) -> (crate::adjust::InteriorCorrections, [f64; 6]) {
-        (self.window.interior(), self.window.interior_std())
-    }
-
     /// Right camera pose for a left pose, with the rig as last adjusted.
     fn right_of(&self, left: &Pose) -> Pose {
         camera_pose(left, &self.window.rig(), Camera::Right)
