@@ -33,7 +33,8 @@ impl Clock for ThreadClock {
 }
 
 const KEYS: &str = "keypoints contrast window sigma_px max_iterations tolerance \
-                    robust_rounds ratio tie_points keep_exclusions fine_octave levels edge velocity_sigma robust max_depth min_ray_angle_deg refine temporal_refine min_ncc back_check area step_angle step_position estimate_rig";
+                    robust_rounds ratio tie_points keep_exclusions fine_octave levels edge velocity_sigma robust max_depth min_ray_angle_deg refine temporal_refine min_ncc back_check area step_angle step_position estimate_rig \
+                    desc_grid ori_radius ori_stride soft_orientation octaves grid_cols grid_rows";
 
 fn apply(cfg: &mut TraverseConfig, key: &str, value: &str) -> Result<(), String> {
     let f = || {
@@ -100,6 +101,13 @@ fn apply(cfg: &mut TraverseConfig, key: &str, value: &str) -> Result<(), String>
         }
         "estimate_rig" => *cfg = cfg.with_rig_estimation(f()? != 0.0),
         "keep_exclusions" => cfg.adjust.keep_exclusions = f()? != 0.0,
+        "desc_grid" => cfg.sift.descriptor_grid = f()? as usize,
+        "ori_radius" => cfg.sift.orientation_radius = f()? as f32,
+        "ori_stride" => cfg.sift.orientation_stride_sigma = f()? as f32,
+        "soft_orientation" => cfg.sift.soft_orientation = f()? != 0.0,
+        "octaves" => cfg.sift.octaves = f()? as usize,
+        "grid_cols" => cfg.sift.grid_cols = f()? as usize,
+        "grid_rows" => cfg.sift.grid_rows = f()? as usize,
         _ => return Err(format!("unknown key {key}; keys: {KEYS}")),
     }
     Ok(())

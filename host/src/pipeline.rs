@@ -12,7 +12,7 @@ use std::path::Path;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum Mode {
-    /// Sliding window (8 epochs), robust snooping, base-length and smoothness constraints.
+    /// Sliding window (3 epochs; 8 with --estimate-rig), robust snooping, base-length and smoothness constraints.
     #[default]
     Window,
     /// Seed 000 (Lemes Neto 2014): two-epoch sequences, base constraints, one re-weighting.

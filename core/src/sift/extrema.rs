@@ -28,6 +28,72 @@ pub fn prelim_threshold(contrast: f32, levels: usize) -> i32 {
     libm::floorf(t) as i32
 }
 
+/// Candidates of `row[start..start + 32]` (bit `i` for column `start + i`): beyond
+/// `thr` in magnitude and not below (above, for minima) their row neighbours. Needs
+/// `1 <= start` and `start + 33 <= row.len()`; the 26-neighbour test follows for the
+/// few that pass. Most samples fail, so this filter is the detector's inner loop.
+#[inline]
+pub fn candidate_mask(row: &[i16], start: usize, thr: i16) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        simd::candidate_mask(row, start, thr)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        candidate_mask_scalar(row, start, 32, thr)
+    }
+}
+
+/// [`candidate_mask`] over `len <= 32` columns, one at a time (the tail of a row, and
+/// the reference of the vector path).
+pub fn candidate_mask_scalar(row: &[i16], start: usize, len: usize, thr: i16) -> u32 {
+    let chunk = &row[start..start + len];
+    let left = &row[start - 1..start + len - 1];
+    let right = &row[start + 1..start + len + 1];
+    let mut mask = 0u32;
+    for (i, ((&v, &a), &b)) in chunk.iter().zip(left).zip(right).enumerate() {
+        let max = (v > thr) & (v >= a) & (v >= b);
+        let min = (v < -thr) & (v <= a) & (v <= b);
+        mask |= ((max | min) as u32) << i;
+    }
+    mask
+}
+
+#[cfg(target_arch = "x86_64")]
+mod simd {
+    use core::arch::x86_64::*;
+
+    /// [`super::candidate_mask`] eight columns per compare, packed to bits by `movemask`.
+    pub fn candidate_mask(row: &[i16], start: usize, thr: i16) -> u32 {
+        assert!(start >= 1 && start + 33 <= row.len());
+        // SAFETY: SSE2 is part of the x86_64 baseline; every load reads columns
+        // `start - 1 + k .. start + 7 + k + 2` for k < 32, inside `row` (asserted above).
+        unsafe {
+            let p = row.as_ptr().add(start);
+            let hi = _mm_set1_epi16(thr);
+            let lo = _mm_set1_epi16(-thr);
+            let bits8 = |k: usize| {
+                let v = _mm_loadu_si128(p.add(k) as *const __m128i);
+                let a = _mm_loadu_si128(p.add(k).sub(1) as *const __m128i);
+                let b = _mm_loadu_si128(p.add(k + 1) as *const __m128i);
+                // v >= a is !(a > v).
+                let below_a = _mm_cmpgt_epi16(a, v);
+                let below_b = _mm_cmpgt_epi16(b, v);
+                let above_a = _mm_cmpgt_epi16(v, a);
+                let above_b = _mm_cmpgt_epi16(v, b);
+                let max = _mm_andnot_si128(_mm_or_si128(below_a, below_b), _mm_cmpgt_epi16(v, hi));
+                let min = _mm_andnot_si128(_mm_or_si128(above_a, above_b), _mm_cmpgt_epi16(lo, v));
+                _mm_or_si128(max, min)
+            };
+            let m0 = _mm_packs_epi16(bits8(0), bits8(8));
+            let m1 = _mm_packs_epi16(bits8(16), bits8(24));
+            let b0 = _mm_movemask_epi8(m0) as u32 & 0xffff;
+            let b1 = _mm_movemask_epi8(m1) as u32 & 0xffff;
+            b0 | (b1 << 16)
+        }
+    }
+}
+
 /// Is `v` (the DoG at `cur[c]`) an extremum over its 26 neighbours?
 /// `rows` are the nine rows: layer below (r-1, r, r+1), this layer, layer above.
 #[inline]
@@ -200,6 +266,35 @@ fn solve3(m: &[[f32; 3]; 3], b: &[f32; 3]) -> Option<[f32; 3]> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn candidate_mask_matches_the_scalar_reference() {
+        // A xorshift stream over the whole i16 range, with runs of equal values and
+        // values at +-thr so that ties and the threshold's edges occur.
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut row = [0i16; 200];
+        for round in 0..200 {
+            let thr = (round * 37 % 300) as i16;
+            for v in row.iter_mut() {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                *v = match x % 5 {
+                    0 => thr,
+                    1 => -thr,
+                    2 => (x >> 8) as i16,
+                    _ => ((x >> 8) % 700) as i16 - 350,
+                };
+            }
+            for start in 1..=row.len() - 33 {
+                assert_eq!(
+                    candidate_mask(&row, start, thr),
+                    candidate_mask_scalar(&row, start, 32, thr),
+                    "round {round} start {start}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn cramer_solves_and_refuses_singular() {

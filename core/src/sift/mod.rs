@@ -51,7 +51,10 @@ use crate::image::ImageView;
 use config::{
     base_lens, dog_len, kernel_len, BORDER, DESC_GRID, KERNEL_STRIDE, MAX_RADIUS, REFINE_ROWS,
 };
-use extrema::{is_extremum, prelim_threshold, refine, RefineParams, Refined};
+use extrema::{
+    candidate_mask, candidate_mask_scalar, is_extremum, prelim_threshold, refine, RefineParams,
+    Refined,
+};
 use levels::Levels;
 use orientation::{orientations, ORI_BINS};
 use pending::{Pending, PendingQueue};
@@ -439,17 +442,12 @@ impl<'a> Sift<'a> {
             let mut start = c0;
             while start < c1 {
                 let end = (start + 32).min(c1);
-                // Candidates: beyond the threshold and not below their row neighbours, as a
-                // bit mask built without branches (vectorises), then visited bit by bit.
-                let chunk = &cur[start..end];
-                let left = &cur[start - 1..end - 1];
-                let right = &cur[start + 1..end + 1];
-                let mut mask = 0u32;
-                for (i, ((&v, &a), &b)) in chunk.iter().zip(left).zip(right).enumerate() {
-                    let max = (v > thr16) & (v >= a) & (v >= b);
-                    let min = (v < -thr16) & (v <= a) & (v <= b);
-                    mask |= ((max | min) as u32) << i;
-                }
+                // Candidates as a bit mask, then visited bit by bit.
+                let mut mask = if end - start == 32 && end < w {
+                    candidate_mask(cur, start, thr16)
+                } else {
+                    candidate_mask_scalar(cur, start, end - start, thr16)
+                };
                 while mask != 0 {
                     let i = mask.trailing_zeros() as usize;
                     mask &= mask - 1;

@@ -6,7 +6,8 @@ use core::f32::consts::PI;
 
 use super::config::SiftConfig;
 use super::fastmath::{atan2_pos, round_i};
-use super::levels::Levels;
+use super::levels::{central, farid, fits, scharr, Levels};
+use super::Gradient;
 
 /// Histogram bins.
 pub const ORI_BINS: usize = 36;
@@ -64,18 +65,14 @@ pub fn orientations(
             c0 += step as isize;
         }
         let c1 = (px + r).min(w - 1 - m);
-        let mut n = 0;
-        for xx in (c0..=c1).step_by(step) {
-            if n >= WINDOW {
-                break;
-            }
-            let Some((dx, dy)) = lv.gradient.at(&rows, xx as usize) else {
-                break;
-            };
-            (samples.dx[n], samples.dy[n]) = (dx, dy);
-            samples.wgt[n] = gi * g[(xx - px).unsigned_abs()];
-            n += 1;
-        }
+        let span = Span {
+            cols: [c0, c1],
+            step,
+            px,
+            gi,
+            g: &g,
+        };
+        let n = samples.gradients(lv.gradient, &rows, &span);
         samples.bins(n, scale);
         if soft {
             // Each vote split between the two nearest bin centres: on a fine level the
@@ -143,6 +140,18 @@ pub fn orientations(
     n
 }
 
+/// Columns `cols[0], cols[0] + step, .. <= cols[1]` of one orientation window row
+/// (`cols[0] >= gradient.reach()`), around the keypoint column `px`, with the row's
+/// Gaussian weight `gi` and the separable weights `g` by column distance.
+#[derive(Clone, Copy)]
+struct Span<'g> {
+    cols: [isize; 2],
+    step: usize,
+    px: isize,
+    gi: f32,
+    g: &'g [f32; MAX_RADIUS + 1],
+}
+
 /// Samples of one window row at most.
 const WINDOW: usize = 2 * MAX_RADIUS + 2;
 
@@ -165,6 +174,42 @@ impl Default for WindowRow {
 }
 
 impl WindowRow {
+    /// Gradients and Gaussian weights of the window row `span`; returns how many were
+    /// written. The operator fits at every column once it fits at the last (checked
+    /// once), and each operator gets its own loop: this is the inner loop of the
+    /// orientation.
+    fn gradients(&mut self, gradient: Gradient, rows: &[&[i16]; 5], span: &Span) -> usize {
+        let m = gradient.reach();
+        let window = &rows[2 - m..=2 + m];
+        let [c0, c1] = span.cols;
+        let last = c1.min(c0 + (WINDOW as isize - 1) * span.step as isize);
+        if last < c0 || !fits(window, last as usize, m) {
+            return 0;
+        }
+        let span = Span {
+            cols: [c0, last],
+            ..*span
+        };
+        match gradient {
+            Gradient::Central => self.fill(|c| central(window, c), &span),
+            Gradient::Scharr => self.fill(|c| scharr(window, c), &span),
+            Gradient::Farid => self.fill(|c| farid(window, c), &span),
+        }
+    }
+
+    /// [`WindowRow::gradients`] with the operator `op` (generic, so it is inlined).
+    #[inline(always)]
+    fn fill(&mut self, op: impl Fn(usize) -> (f32, f32), span: &Span) -> usize {
+        let [c0, last] = span.cols;
+        let mut n = 0;
+        for xx in (c0..=last).step_by(span.step) {
+            (self.dx[n], self.dy[n]) = op(xx as usize);
+            self.wgt[n] = span.gi * span.g[(xx - span.px).unsigned_abs().min(MAX_RADIUS)];
+            n += 1;
+        }
+        n
+    }
+
     /// Votes of the first `n` samples (the bin before wrapping at `ORI_BINS`).
     fn bins(&mut self, n: usize, scale: f32) {
         #[cfg(target_arch = "x86_64")]

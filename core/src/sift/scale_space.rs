@@ -7,7 +7,7 @@
 //! their own ring of `2 r + 1` rows and blur that ring vertically. Borders replicate
 //! the edge pixel, which keeps the vertical pass causal at the top of the image.
 
-use super::config::{KERNEL_BITS, KERNEL_STRIDE, MAX_RADIUS};
+use super::config::{FRAC_BITS, KERNEL_BITS, KERNEL_STRIDE, MAX_RADIUS};
 
 /// Fills `taps[0..=radius]` (centre first, then one side) with a Q14 Gaussian whose
 /// full symmetric sum is exactly `1 << KERNEL_BITS`.
@@ -119,15 +119,10 @@ pub fn convolve(rows: &[&[i16]], taps: &[i32], radius: usize, acc: &mut [i32], o
 
 #[cfg(target_arch = "x86_64")]
 mod simd {
-    use super::{KERNEL_BITS, MAX_RADIUS};
+    use super::{FRAC_BITS, KERNEL_BITS, MAX_RADIUS};
     use core::arch::x86_64::*;
 
     /// Columns `0..w - w % 8` of [`super::convolve`]; returns how many were written.
-    ///
-    /// The symmetric rows are added first (`l + h` fits i16: samples are at most
-    /// 255 * 64), then two taps go into each `madd`: (s_0, s_1), (s_2, s_3), ... with the
-    /// centre row as s_0 and a zero row after an odd last tap. The sums are the scalar
-    /// path's exactly.
     pub fn convolve_sse2(
         rows: &[&[i16]],
         taps: &[i32],
@@ -135,15 +130,71 @@ mod simd {
         out: &mut [i16],
         start: usize,
     ) -> usize {
-        let w = out.len();
-        let blocks = w / 8;
         let radius = radius.min(MAX_RADIUS);
-        // SAFETY: every row holds at least `w` values (checked by the caller) and each
-        // load/store below touches columns `c..c + 8` with `c + 8 <= blocks * 8 <= w`.
-        // SSE2 is part of the x86_64 baseline.
+        let centre = rows[radius].as_ptr();
+        // Row pointers of tap j = 1..=radius (left and right of the centre).
+        let mut lp = [centre; MAX_RADIUS + 1];
+        let mut hp = [centre; MAX_RADIUS + 1];
+        for j in 1..=radius {
+            lp[j] = rows[radius - j].as_ptr();
+            hp[j] = rows[radius + j].as_ptr();
+        }
+        // SAFETY (both loaders): every row holds at least `out.len()` values (checked by
+        // the caller) and `columns` loads columns `c..c + 8` with `c + 8 <= out.len()`.
+        let load = |c: usize| unsafe { _mm_loadu_si128(centre.add(c) as *const __m128i) };
+        let sym = |j: usize, c: usize| unsafe {
+            _mm_add_epi16(
+                _mm_loadu_si128(lp[j].add(c) as *const __m128i),
+                _mm_loadu_si128(hp[j].add(c) as *const __m128i),
+            )
+        };
+        columns(taps, radius, KERNEL_BITS, out, start, load, sym)
+    }
+
+    /// Columns `0..w - w % 8` of [`super::blur_column_u8`]: u8 rows, widened to i16
+    /// on load (`l + h` fits: at most 510), then [`columns`] shifted by 14 - 6.
+    pub fn column_u8_sse2(rows: &[&[u8]], taps: &[i32], radius: usize, out: &mut [i16]) -> usize {
+        let radius = radius.min(MAX_RADIUS);
+        let centre = rows[radius].as_ptr();
+        let mut lp = [centre; MAX_RADIUS + 1];
+        let mut hp = [centre; MAX_RADIUS + 1];
+        for j in 1..=radius {
+            lp[j] = rows[radius - j].as_ptr();
+            hp[j] = rows[radius + j].as_ptr();
+        }
+        // SAFETY: as in `convolve_sse2`; each load reads the 8 bytes `c..c + 8`.
+        let widen = |p: *const u8, c: usize| unsafe {
+            _mm_unpacklo_epi8(
+                _mm_loadl_epi64(p.add(c) as *const __m128i),
+                _mm_setzero_si128(),
+            )
+        };
+        let load = |c: usize| widen(centre, c);
+        let sym = |j: usize, c: usize| unsafe { _mm_add_epi16(widen(lp[j], c), widen(hp[j], c)) };
+        columns(taps, radius, KERNEL_BITS - FRAC_BITS, out, 0, load, sym)
+    }
+
+    /// The symmetric kernel eight columns at a time from `start` (rounded up to 8):
+    /// `centre(c)` loads the centre row at columns `c..c + 8` as i16, `sym(j, c)` the sum
+    /// of the rows `radius -+ j`. Two taps go into each `madd`: (s_0, s_1), (s_2, s_3),
+    /// ... with the centre row as s_0 and a zero row after an odd last tap, so the sums
+    /// are the scalar path's exactly; the result is rounded and shifted by `shift`.
+    #[inline(always)]
+    fn columns(
+        taps: &[i32],
+        radius: usize,
+        shift: u32,
+        out: &mut [i16],
+        start: usize,
+        centre: impl Fn(usize) -> __m128i,
+        sym: impl Fn(usize, usize) -> __m128i,
+    ) -> usize {
+        let blocks = out.len() / 8;
+        // SAFETY: SSE2 is part of the x86_64 baseline; the store writes columns
+        // `c..c + 8` with `c + 8 <= blocks * 8 <= out.len()`.
         unsafe {
-            let round = _mm_set1_epi32(1 << (KERNEL_BITS - 1));
-            let centre = rows[radius].as_ptr();
+            let round = _mm_set1_epi32(1 << (shift - 1));
+            let count = _mm_cvtsi32_si128(shift as i32);
             let tap = |j: usize| if j <= radius { taps[j] & 0xffff } else { 0 };
             // Hoisted per-pair constants: (k_2m, k_2m+1) pairs.
             let mut kv = [_mm_setzero_si128(); MAX_RADIUS / 2 + 1];
@@ -151,26 +202,14 @@ mod simd {
             for (m, k) in kv.iter_mut().enumerate().take(pairs) {
                 *k = _mm_set1_epi32(tap(2 * m) | (tap(2 * m + 1) << 16));
             }
-            // Row pointers of tap j = 1..=radius (left and right of the centre).
-            let mut lp = [centre; MAX_RADIUS + 1];
-            let mut hp = [centre; MAX_RADIUS + 1];
-            for j in 1..=radius {
-                lp[j] = rows[radius - j].as_ptr();
-                hp[j] = rows[radius + j].as_ptr();
-            }
             let zero = _mm_setzero_si128();
-            let sym = |j: usize, c: usize| {
-                let l = _mm_loadu_si128(lp[j].add(c) as *const __m128i);
-                let h = _mm_loadu_si128(hp[j].add(c) as *const __m128i);
-                _mm_add_epi16(l, h)
-            };
             // Pair 0 is (centre, s_1); full pairs (s_2m, s_2m+1) follow; an even radius
             // leaves s_radius alone with a zero.
             let full = radius.div_ceil(2);
             let odd_tail = radius >= 2 && radius.is_multiple_of(2);
             for b in start.div_ceil(8)..blocks {
                 let c = b * 8;
-                let x = _mm_loadu_si128(centre.add(c) as *const __m128i);
+                let x = centre(c);
                 let s1 = if radius >= 1 { sym(1, c) } else { zero };
                 let mut a0 = _mm_add_epi32(round, _mm_madd_epi16(_mm_unpacklo_epi16(x, s1), kv[0]));
                 let mut a1 = _mm_add_epi32(round, _mm_madd_epi16(_mm_unpackhi_epi16(x, s1), kv[0]));
@@ -186,8 +225,8 @@ mod simd {
                     a0 = _mm_add_epi32(a0, _mm_madd_epi16(_mm_unpacklo_epi16(s0, zero), k));
                     a1 = _mm_add_epi32(a1, _mm_madd_epi16(_mm_unpackhi_epi16(s0, zero), k));
                 }
-                a0 = _mm_srai_epi32(a0, KERNEL_BITS as i32);
-                a1 = _mm_srai_epi32(a1, KERNEL_BITS as i32);
+                a0 = _mm_sra_epi32(a0, count);
+                a1 = _mm_sra_epi32(a1, count);
                 _mm_storeu_si128(
                     out.as_mut_ptr().add(c) as *mut __m128i,
                     _mm_packs_epi32(a0, a1),
@@ -318,24 +357,54 @@ pub fn blur_column_u8<'r>(
     acc: &mut [i32],
     out: &mut [i16],
 ) {
+    let radius = radius.min(MAX_RADIUS);
     let w = out.len().min(acc.len());
-    let acc = &mut acc[..w];
-    let centre = rows(radius);
+    let mut list: [&[u8]; 2 * MAX_RADIUS + 1] = [&[]; 2 * MAX_RADIUS + 1];
+    for (j, row) in list.iter_mut().enumerate().take(2 * radius + 1) {
+        *row = rows(j);
+    }
+    let list = &list[..2 * radius + 1];
+    if taps.len() <= radius || list.iter().any(|r| r.len() < w) {
+        return;
+    }
+    #[cfg(target_arch = "x86_64")]
+    let done = simd::column_u8_sse2(list, taps, radius, &mut out[..w]);
+    #[cfg(not(target_arch = "x86_64"))]
+    let done = 0;
+    column_u8_scalar(
+        list,
+        taps,
+        radius,
+        &mut acc[done..w],
+        done,
+        &mut out[done..w],
+    );
+}
+
+/// Columns `first..first + out.len()` of [`blur_column_u8`], one at a time.
+fn column_u8_scalar(
+    rows: &[&[u8]],
+    taps: &[i32],
+    radius: usize,
+    acc: &mut [i32],
+    first: usize,
+    out: &mut [i16],
+) {
     let k0 = taps[0] as i16 as i32;
-    for (a, &p) in acc.iter_mut().zip(&centre[..w]) {
+    for (a, &p) in acc.iter_mut().zip(&rows[radius][first..]) {
         *a = k0 * p as i16 as i32;
     }
     for (j, &t) in taps.iter().enumerate().take(radius + 1).skip(1) {
         let kj = t as i16 as i32;
-        let lo = &rows(radius - j)[..w];
-        let hi = &rows(radius + j)[..w];
+        let lo = &rows[radius - j][first..];
+        let hi = &rows[radius + j][first..];
         for ((a, &l), &h) in acc.iter_mut().zip(lo).zip(hi) {
             *a += kj * (l as i16 + h as i16) as i32;
         }
     }
     // Q14 taps times 2^6 fractional bits: shift by 14 - 6.
-    let shift = KERNEL_BITS - super::config::FRAC_BITS;
-    for (o, &a) in out[..w].iter_mut().zip(acc.iter()) {
+    let shift = KERNEL_BITS - FRAC_BITS;
+    for (o, &a) in out.iter_mut().zip(acc.iter()) {
         *o = ((a + (1 << (shift - 1))) >> shift) as i16;
     }
 }
@@ -401,6 +470,40 @@ mod tests {
                         round_q14(sum),
                         "radius {radius} width {w} column {c}"
                     );
+                }
+            }
+        }
+    }
+
+    /// The u8 vertical pass (vectorised on x86_64) gives the scalar definition's
+    /// rounded sums exactly, for every radius and odd and even widths.
+    #[test]
+    fn blur_column_u8_is_exact_for_every_radius() {
+        let mut taps = [0i32; KERNEL_STRIDE];
+        let mut seed = 777u32;
+        for radius in 0..=MAX_RADIUS {
+            make_kernel(0.3 + radius as f32 / 3.0, radius, &mut taps);
+            for &w in &[1usize, 7, 8, 29, 64] {
+                let data: [[u8; 64]; 2 * MAX_RADIUS + 1] = core::array::from_fn(|_| {
+                    core::array::from_fn(|_| {
+                        seed = seed.wrapping_mul(1_103_515_245).wrapping_add(12345);
+                        if seed >> 31 == 1 {
+                            255
+                        } else {
+                            (seed >> 16) as u8
+                        }
+                    })
+                });
+                let mut acc = [0i32; 64];
+                let mut out = [0i16; 64];
+                blur_column_u8(|j| &data[j][..], &taps, radius, &mut acc, &mut out[..w]);
+                for c in 0..w {
+                    let mut sum = taps[0] * data[radius][c] as i32;
+                    for j in 1..=radius {
+                        sum += taps[j] * (data[radius - j][c] as i32 + data[radius + j][c] as i32);
+                    }
+                    let expected = ((sum + (1 << 7)) >> 8) as i16;
+                    assert_eq!(out[c], expected, "radius {radius} width {w} column {c}");
                 }
             }
         }

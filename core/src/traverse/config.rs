@@ -61,6 +61,9 @@ pub struct TraverseConfig {
     pub max_area_ties: usize,
 }
 
+/// Descriptor samples per axis in the traverse ([`SiftConfig::descriptor_grid`]).
+pub const TRAVERSE_DESCRIPTOR_GRID: usize = 12;
+
 /// Shortest window with the rig estimated ([`TraverseConfig::with_rig_estimation`]).
 pub const RIG_ESTIMATION_WINDOW: usize = 8;
 
@@ -79,7 +82,14 @@ impl TraverseConfig {
             max_width: w as usize,
             max_height: h as usize,
             max_keypoints,
+            // Four octaves reach keypoints of sigma 25 px at 640x480, far beyond what
+            // stays matchable between epochs (the pipeline settings' default too).
+            octaves: 4,
             contrast_threshold: TRAVERSE_CONTRAST,
+            // Descriptors only pair the features; positions come from the NCC refinement.
+            // 12 x 12 gradient samples instead of 20 x 20 cost 2.4x less per descriptor
+            // and gave the same drift on the rendered streets (docs/traverse.md, Speed).
+            descriptor_grid: TRAVERSE_DESCRIPTOR_GRID,
             ..SiftConfig::default()
         };
         let mut matching = MatchConfig::rectified(w, h, max_keypoints, w as f32 * 0.5);
@@ -114,7 +124,9 @@ impl TraverseConfig {
             max_points: 1,
             max_observations: 1,
             max_iterations: 20,
-            max_robust_rounds: 2,
+            // One snooping round after the Cauchy re-weighting: the window re-adjusts
+            // every epoch, so a blunder missed now is tested again at the next epoch.
+            max_robust_rounds: 1,
             estimate_rig: false,
             sigmas: ConstraintSigmas {
                 base_length_m: 1e-4,
