@@ -226,9 +226,16 @@ impl TraverseProcessor<'_> {
 
     /// Whether observation `i` (of `o`) is the first of its point in its epoch,
     /// and whether the point has no observation in a later epoch (it is final).
+    /// The point's own observations come from the window's index (a few per point);
+    /// scanning them all per observation would cost the square of their number.
     fn first_and_final(&self, i: usize, o: &WindowObservation) -> (bool, bool) {
         let (mut first, mut last) = (true, true);
-        for j in 0..self.traverse.window_observation_count() {
+        let all = 0..self.traverse.window_observation_count() as u32;
+        let own = self.traverse.window_point_observations(o.point);
+        let candidates = own.into_iter().flatten().copied();
+        let scan = own.is_none().then_some(all).into_iter().flatten();
+        for j in candidates.chain(scan) {
+            let j = j as usize;
             let Some(q) = self.traverse.window_observation(j) else {
                 continue;
             };

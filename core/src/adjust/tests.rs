@@ -685,6 +685,52 @@ fn clean_windows_are_unbiased_with_unit_sigma0() {
     assert!(frac >= 0.99, "{ok}/{n} within 3 sigma");
 }
 
+/// The per-point observation lists of the last adjustment hold exactly each point's
+/// observations, and are withdrawn as soon as an observation or a point is added.
+#[test]
+fn point_observation_lists_follow_the_last_adjustment() {
+    let s = scene(5, 3, 60, 0.0);
+    let cfg = AdjustConfig {
+        window: 3,
+        max_points: 61,
+        max_observations: s.obs.len() + 1,
+        ..AdjustConfig::default()
+    };
+    let mut mem = arena_for(&cfg);
+    let mut arena = Arena::new(&mut mem);
+    let (mut w, ids) = load(&s, cfg, &mut arena, 9);
+    assert!(
+        w.point_observations(ids[0]).is_none(),
+        "no index before a solve"
+    );
+    w.solve().unwrap();
+    let mut listed = 0;
+    for &id in &ids {
+        let list = w.point_observations(id).expect("indexed after the solve");
+        let expected: Vec<u32> = (0..w.observations().len() as u32)
+            .filter(|&i| w.observations()[i as usize].point == id)
+            .collect();
+        assert_eq!(list, &expected[..], "point {id}");
+        listed += list.len();
+    }
+    assert_eq!(listed, s.obs.len());
+    let extra = w.add_point(s.points[0]).unwrap();
+    assert!(
+        w.point_observations(ids[0]).is_none(),
+        "stale after add_point"
+    );
+    w.solve().unwrap();
+    assert_eq!(w.point_observations(extra), Some(&[][..]));
+    let (e, c, _, xy, _) = s.obs[0];
+    let cam = if c == 0 { Camera::Left } else { Camera::Right };
+    w.add_observation(Observation::new(e as u32, cam, extra, xy, [1.0, 1.0]))
+        .unwrap();
+    assert!(
+        w.point_observations(extra).is_none(),
+        "stale after add_observation"
+    );
+}
+
 #[test]
 fn robust_default_flags_blunders_on_clean_and_dirty_data() {
     // Clean data: the default (snooping) flags almost nothing.

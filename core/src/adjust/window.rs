@@ -433,6 +433,9 @@ pub struct Window<'a> {
     n_obs: usize,
     point_start: &'a mut [u32],
     obs_order: &'a mut [u32],
+    /// Point slots that `point_start` / `obs_order` describe, while no observation
+    /// came or went since [`Window::build_index`].
+    indexed: Option<usize>,
     reduced: &'a mut [f64],
     rhs: &'a mut [f64],
     saved_cam: &'a mut [f64],
@@ -606,6 +609,7 @@ impl<'a> Window<'a> {
             n_obs: 0,
             point_start,
             obs_order,
+            indexed: None,
             reduced,
             rhs,
             saved_cam,
@@ -772,6 +776,7 @@ impl<'a> Window<'a> {
         ];
         p.flags = PT_USED;
         self.points[slot] = p;
+        self.indexed = None;
         Ok(slot as u32)
     }
 
@@ -821,6 +826,7 @@ impl<'a> Window<'a> {
         o.flags = 0;
         self.obs[self.n_obs] = o;
         self.n_obs += 1;
+        self.indexed = None;
         self.points[p].nobs += 1;
         Ok(self.n_obs - 1)
     }
@@ -917,6 +923,20 @@ impl<'a> Window<'a> {
         &self.obs[..self.n_obs]
     }
 
+    /// Indices (into [`Window::observations`]) of point slot `p`'s observations, from
+    /// the index of the last adjustment; `None` when observations came or went since.
+    pub fn point_observations(&self, p: u32) -> Option<&[u32]> {
+        let p = p as usize;
+        if !self.indexed.is_some_and(|np| p < np) {
+            return None;
+        }
+        let (s0, s1) = (
+            self.point_start[p] as usize,
+            self.point_start[p + 1] as usize,
+        );
+        self.obs_order.get(s0..s1)
+    }
+
     /// Observations flagged as blunders, with their indices.
     pub fn flagged(&self) -> impl Iterator<Item = (usize, &Observation)> {
         self.observations()
@@ -985,6 +1005,7 @@ impl<'a> Window<'a> {
             }
         }
         self.n_obs = k;
+        self.indexed = None;
         // Prior of the new first epoch from its marginal covariance.
         let next = &mut self.epochs[1];
         let mut info = [0.0; 36];
@@ -1167,6 +1188,7 @@ impl<'a> Window<'a> {
             self.point_start[p] = self.point_start[p - 1];
         }
         self.point_start[0] = 0;
+        self.indexed = Some(np);
     }
 
     /// Builds point `p`'s blocks from its observations with weight factors

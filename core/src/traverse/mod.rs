@@ -864,6 +864,12 @@ impl Traverse<'_> {
         self.window.observations().len()
     }
 
+    /// Indices of the window observations of `point` ([`WindowObservation::point`]) as
+    /// of the last adjustment; `None` when the window changed since (scan instead).
+    pub fn window_point_observations(&self, point: u32) -> Option<&[u32]> {
+        self.window.point_observations(point)
+    }
+
     /// Observation `i` of the window (storage order), cheap: no projection.
     pub fn window_observation(&self, i: usize) -> Option<WindowObservation> {
         let o = self.window.observations().get(i)?;
