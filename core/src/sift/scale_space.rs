@@ -85,12 +85,15 @@ pub fn convolve(rows: &[&[i16]], taps: &[i32], radius: usize, acc: &mut [i32], o
     }
     #[cfg(target_arch = "x86_64")]
     let done = {
-        let start = if simd::has_avx2() {
-            // SAFETY: the CPU has AVX2 (checked at run time); rows are checked above.
-            unsafe { simd::convolve_avx2(rows, taps, radius, out) }
-        } else {
-            0
-        };
+        // SAFETY (both): the CPU has the feature (checked at run time); rows are
+        // checked above.
+        let mut start = 0;
+        if simd::has_avx512() {
+            start = unsafe { simd::convolve_avx512(rows, taps, radius, out, start) };
+        }
+        if simd::has_avx2() {
+            start = unsafe { simd::convolve_avx2(rows, taps, radius, out, start) };
+        }
         simd::convolve_sse2(rows, taps, radius, out, start)
     };
     #[cfg(not(target_arch = "x86_64"))]
@@ -237,100 +240,127 @@ mod simd {
     }
 
     cpufeatures::new!(avx2_cpuid, "avx2");
+    cpufeatures::new!(avx512_cpuid, "avx512bw");
 
     /// Whether this CPU runs [`convolve_avx2`] (detected once).
     pub fn has_avx2() -> bool {
         avx2_cpuid::get()
     }
 
-    /// Columns `0..w - w % 16` of [`super::convolve`], sixteen at a time: the arithmetic
-    /// of [`convolve_sse2`] on 256-bit registers. Returns how many were written.
-    ///
-    /// # Safety
-    /// The CPU must support AVX2, and every row must hold at least `out.len()` values.
-    #[target_feature(enable = "avx2")]
-    pub unsafe fn convolve_avx2(
-        rows: &[&[i16]],
-        taps: &[i32],
-        radius: usize,
-        out: &mut [i16],
-    ) -> usize {
-        let w = out.len();
-        let blocks = w / 16;
-        let radius = radius.min(MAX_RADIUS);
-        // SAFETY: loads and stores touch columns `c..c + 16` with `c + 16 <= w`.
-        unsafe {
-            let round = _mm256_set1_epi32(1 << (KERNEL_BITS - 1));
-            let centre = rows[radius].as_ptr();
-            let tap = |j: usize| if j <= radius { taps[j] & 0xffff } else { 0 };
-            let mut kv = [_mm256_setzero_si256(); MAX_RADIUS / 2 + 1];
-            let pairs = radius / 2 + 1;
-            let mut m = 0;
-            while m < pairs {
-                kv[m] = _mm256_set1_epi32(tap(2 * m) | (tap(2 * m + 1) << 16));
-                m += 1;
-            }
-            let mut lp = [centre; MAX_RADIUS + 1];
-            let mut hp = [centre; MAX_RADIUS + 1];
-            for j in 1..=radius {
-                lp[j] = rows[radius - j].as_ptr();
-                hp[j] = rows[radius + j].as_ptr();
-            }
-            let zero = _mm256_setzero_si256();
-            // A macro, not a closure: closures do not inherit `target_feature`, and the
-            // intrinsics would become calls.
-            macro_rules! sym {
-                ($j:expr, $c:expr) => {
-                    _mm256_add_epi16(
-                        _mm256_loadu_si256(lp[$j].add($c) as *const __m256i),
-                        _mm256_loadu_si256(hp[$j].add($c) as *const __m256i),
-                    )
-                };
-            }
-            let full = radius.div_ceil(2);
-            let odd_tail = radius >= 2 && radius.is_multiple_of(2);
-            // Unpacking works within 128-bit halves: a0 holds columns 0-3 and 8-11, a1
-            // columns 4-7 and 12-15, and packing restores the order.
-            let mut b = 0;
-            while b < blocks {
-                let c = b * 16;
-                b += 1;
-                let x = _mm256_loadu_si256(centre.add(c) as *const __m256i);
-                let s1 = if radius >= 1 { sym!(1, c) } else { zero };
-                let k = kv[0];
-                let mut a0 =
-                    _mm256_add_epi32(round, _mm256_madd_epi16(_mm256_unpacklo_epi16(x, s1), k));
-                let mut a1 =
-                    _mm256_add_epi32(round, _mm256_madd_epi16(_mm256_unpackhi_epi16(x, s1), k));
-                // Plain index loop: iterator adapters are not inlined into a
-                // `target_feature` function and would cost a call per pair.
-                let mut m = 1;
-                while m < full {
-                    let k = kv[m];
-                    let s0 = sym!(2 * m, c);
-                    let s1 = sym!(2 * m + 1, c);
-                    a0 = _mm256_add_epi32(a0, _mm256_madd_epi16(_mm256_unpacklo_epi16(s0, s1), k));
-                    a1 = _mm256_add_epi32(a1, _mm256_madd_epi16(_mm256_unpackhi_epi16(s0, s1), k));
-                    m += 1;
-                }
-                if odd_tail {
-                    let s0 = sym!(radius, c);
-                    let k = kv[radius / 2];
-                    a0 =
-                        _mm256_add_epi32(a0, _mm256_madd_epi16(_mm256_unpacklo_epi16(s0, zero), k));
-                    a1 =
-                        _mm256_add_epi32(a1, _mm256_madd_epi16(_mm256_unpackhi_epi16(s0, zero), k));
-                }
-                a0 = _mm256_srai_epi32(a0, KERNEL_BITS as i32);
-                a1 = _mm256_srai_epi32(a1, KERNEL_BITS as i32);
-                _mm256_storeu_si256(
-                    out.as_mut_ptr().add(c) as *mut __m256i,
-                    _mm256_packs_epi32(a0, a1),
-                );
-            }
-        }
-        blocks * 16
+    /// Whether this CPU runs [`convolve_avx512`] (detected once).
+    pub fn has_avx512() -> bool {
+        avx512_cpuid::get()
     }
+
+    /// One wide version of [`convolve_sse2`]'s arithmetic: `$lanes` columns per block
+    /// on the named register type and intrinsics. Unpacking works within 128-bit lanes:
+    /// the low accumulator holds columns 0-3, 8-11, .. and the high one 4-7, 12-15, ..,
+    /// and packing restores the order.
+    macro_rules! wide_convolve {
+        ($(#[$doc:meta])* $name:ident, $feature:literal, $lanes:expr, $vec:ty,
+         $set1:ident, $setzero:ident, $loadu:ident, $storeu:ident, $add16:ident,
+         $add32:ident, $madd:ident, $lo:ident, $hi:ident, $srai:ident, $imm:ty, $packs:ident) => {
+            $(#[$doc])*
+            /// Returns the end of the columns written (from `start`, a multiple of the
+            /// block, up to `w - w % $lanes`).
+            ///
+            /// # Safety
+            /// The CPU must support the feature, and every row must hold at least
+            /// `out.len()` values.
+            #[target_feature(enable = $feature)]
+            pub unsafe fn $name(
+                rows: &[&[i16]],
+                taps: &[i32],
+                radius: usize,
+                out: &mut [i16],
+                start: usize,
+            ) -> usize {
+                let w = out.len();
+                let blocks = w / $lanes;
+                let radius = radius.min(MAX_RADIUS);
+                // SAFETY: loads and stores touch columns `c..c + $lanes` with
+                // `c + $lanes <= w`.
+                unsafe {
+                    let round = $set1(1 << (KERNEL_BITS - 1));
+                    let centre = rows[radius].as_ptr();
+                    let tap = |j: usize| if j <= radius { taps[j] & 0xffff } else { 0 };
+                    let mut kv = [$setzero(); MAX_RADIUS / 2 + 1];
+                    let pairs = radius / 2 + 1;
+                    let mut m = 0;
+                    while m < pairs {
+                        kv[m] = $set1(tap(2 * m) | (tap(2 * m + 1) << 16));
+                        m += 1;
+                    }
+                    let mut lp = [centre; MAX_RADIUS + 1];
+                    let mut hp = [centre; MAX_RADIUS + 1];
+                    for j in 1..=radius {
+                        lp[j] = rows[radius - j].as_ptr();
+                        hp[j] = rows[radius + j].as_ptr();
+                    }
+                    let zero = $setzero();
+                    // A macro, not a closure: closures do not inherit `target_feature`,
+                    // and the intrinsics would become calls.
+                    macro_rules! sym {
+                        ($j:expr, $c:expr) => {
+                            $add16(
+                                $loadu(lp[$j].add($c) as *const $vec),
+                                $loadu(hp[$j].add($c) as *const $vec),
+                            )
+                        };
+                    }
+                    let full = radius.div_ceil(2);
+                    let odd_tail = radius >= 2 && radius.is_multiple_of(2);
+                    let mut b = start.div_ceil($lanes);
+                    while b < blocks {
+                        let c = b * $lanes;
+                        b += 1;
+                        let x = $loadu(centre.add(c) as *const $vec);
+                        let s1 = if radius >= 1 { sym!(1, c) } else { zero };
+                        let k = kv[0];
+                        let mut a0 = $add32(round, $madd($lo(x, s1), k));
+                        let mut a1 = $add32(round, $madd($hi(x, s1), k));
+                        // Plain index loop: iterator adapters are not inlined into a
+                        // `target_feature` function and would cost a call per pair.
+                        let mut m = 1;
+                        while m < full {
+                            let k = kv[m];
+                            let s0 = sym!(2 * m, c);
+                            let s1 = sym!(2 * m + 1, c);
+                            a0 = $add32(a0, $madd($lo(s0, s1), k));
+                            a1 = $add32(a1, $madd($hi(s0, s1), k));
+                            m += 1;
+                        }
+                        if odd_tail {
+                            let s0 = sym!(radius, c);
+                            let k = kv[radius / 2];
+                            a0 = $add32(a0, $madd($lo(s0, zero), k));
+                            a1 = $add32(a1, $madd($hi(s0, zero), k));
+                        }
+                        a0 = $srai::<{ KERNEL_BITS as $imm }>(a0);
+                        a1 = $srai::<{ KERNEL_BITS as $imm }>(a1);
+                        $storeu(out.as_mut_ptr().add(c) as *mut $vec, $packs(a0, a1));
+                    }
+                }
+                blocks * $lanes
+            }
+        };
+    }
+
+    wide_convolve!(
+        /// Sixteen columns at a time on 256-bit registers.
+        convolve_avx2, "avx2", 16, __m256i, _mm256_set1_epi32, _mm256_setzero_si256,
+        _mm256_loadu_si256, _mm256_storeu_si256, _mm256_add_epi16, _mm256_add_epi32,
+        _mm256_madd_epi16, _mm256_unpacklo_epi16, _mm256_unpackhi_epi16,
+        _mm256_srai_epi32, i32, _mm256_packs_epi32
+    );
+
+    wide_convolve!(
+        /// Thirty-two columns at a time on 512-bit registers.
+        convolve_avx512, "avx512bw", 32, __m512i, _mm512_set1_epi32, _mm512_setzero_si512,
+        _mm512_loadu_si512, _mm512_storeu_si512, _mm512_add_epi16, _mm512_add_epi32,
+        _mm512_madd_epi16, _mm512_unpacklo_epi16, _mm512_unpackhi_epi16,
+        _mm512_srai_epi32, u32, _mm512_packs_epi32
+    );
 }
 
 /// Vertical pass: `rows(j)` is the row at offset `j - radius` (already clamped by the caller).
