@@ -12,7 +12,7 @@
 //! `--help`; `poses=FILE` writes the estimated KITTI poses); without them it runs the firmware's defaults for the dataset's rig.
 use phototraverse_core::budget::{Arena, MemoryBudget};
 use phototraverse_core::camera::kitti_from_pose;
-use phototraverse_core::traverse::{Clock, Traverse, TraverseConfig};
+use phototraverse_core::traverse::{flags, Clock, Traverse, TraverseConfig};
 use phototraverse_host::dataset::Dataset;
 use phototraverse_host::eval::evaluate;
 use std::path::PathBuf;
@@ -32,84 +32,104 @@ impl Clock for ThreadClock {
     }
 }
 
-const KEYS: &str = "keypoints contrast window sigma_px max_iterations tolerance \
-                    robust_rounds ratio tie_points keep_exclusions fine_octave levels edge velocity_sigma robust max_depth min_ray_angle_deg refine temporal_refine min_ncc back_check area step_angle step_position estimate_rig \
-                    desc_grid ori_radius ori_stride soft_orientation octaves grid_cols grid_rows";
+/// The configuration keys: each sets its part of the configuration from the value.
+type Setter = fn(&mut TraverseConfig, f64);
+const SETTERS: &[(&str, Setter)] = &[
+    ("keypoints", |c, v| {
+        c.sift.max_keypoints = v as usize;
+        c.matching.max_keypoints = v as usize;
+    }),
+    ("contrast", |c, v| c.sift.contrast_threshold = v as f32),
+    ("window", |c, v| {
+        c.adjust.window = v as usize;
+        c.matching.track_history = c.adjust.window;
+    }),
+    ("sigma_px", |c, v| c.sigma_px = v),
+    ("max_iterations", |c, v| {
+        c.adjust.max_iterations = v as usize
+    }),
+    ("tolerance", |c, v| c.adjust.tolerance = v),
+    ("step_angle", |c, v| c.adjust.step_tolerance[0] = v),
+    ("step_position", |c, v| c.adjust.step_tolerance[1] = v),
+    ("robust_rounds", |c, v| {
+        c.adjust.max_robust_rounds = v as usize
+    }),
+    ("ratio", |c, v| c.matching.ratio = v as f32),
+    ("tie_points", |c, v| c.matching.max_tie_points = v as usize),
+    ("keep_exclusions", |c, v| {
+        c.adjust.keep_exclusions = v != 0.0
+    }),
+    ("fine_octave", |c, v| c.sift.fine_octave = v != 0.0),
+    ("levels", |c, v| c.sift.levels = v as usize),
+    ("edge", |c, v| c.sift.edge_threshold = v as f32),
+    ("velocity_sigma", |c, v| {
+        c.adjust.sigmas.velocity_change_mps = v
+    }),
+    ("robust", |c, v| {
+        c.adjust.robust = if v == 0.0 {
+            phototraverse_core::adjust::Robust::None
+        } else {
+            phototraverse_core::adjust::Robust::snooping()
+        }
+    }),
+    ("max_depth", |c, v| c.max_depth_m = v),
+    ("min_ray_angle_deg", |c, v| {
+        c.min_ray_angle_rad = v.to_radians()
+    }),
+    ("refine", |c, v| {
+        c.matching.refine = (v != 0.0).then(|| phototraverse_core::matching::RefineConfig {
+            rows_only: matches!(
+                c.matching.stereo,
+                phototraverse_core::matching::StereoGeometry::Rectified { .. }
+            ),
+            ..Default::default()
+        })
+    }),
+    ("temporal_refine", |c, v| c.temporal_refine = v != 0.0),
+    ("min_ncc", |c, v| {
+        if let Some(r) = c.matching.refine.as_mut() {
+            r.min_ncc = v as f32;
+        }
+    }),
+    ("back_check", |c, v| {
+        if let Some(r) = c.matching.refine.as_mut() {
+            r.back_check_px = v as f32;
+        }
+    }),
+    ("area", |c, v| {
+        c.max_area_ties = v as usize;
+        c.fit_capacities();
+    }),
+    ("estimate_rig", |c, v| *c = c.with_rig_estimation(v != 0.0)),
+    ("desc_grid", |c, v| c.sift.descriptor_grid = v as usize),
+    ("ori_radius", |c, v| c.sift.orientation_radius = v as f32),
+    ("ori_stride", |c, v| {
+        c.sift.orientation_stride_sigma = v as f32
+    }),
+    ("soft_orientation", |c, v| {
+        c.sift.soft_orientation = v != 0.0
+    }),
+    ("octaves", |c, v| c.sift.octaves = v as usize),
+    ("grid_cols", |c, v| c.sift.grid_cols = v as usize),
+    ("grid_rows", |c, v| c.sift.grid_rows = v as usize),
+];
+
+fn keys() -> String {
+    SETTERS
+        .iter()
+        .map(|(k, _)| *k)
+        .collect::<Vec<_>>()
+        .join(" ")
+}
 
 fn apply(cfg: &mut TraverseConfig, key: &str, value: &str) -> Result<(), String> {
-    let f = || {
-        value
-            .parse::<f64>()
-            .map_err(|e| format!("{key}={value}: {e}"))
+    let Some((_, set)) = SETTERS.iter().find(|(k, _)| *k == key) else {
+        return Err(format!("unknown key {key}; keys: {}", keys()));
     };
-    match key {
-        "keypoints" => {
-            let n = f()? as usize;
-            cfg.sift.max_keypoints = n;
-            cfg.matching.max_keypoints = n;
-        }
-        "contrast" => cfg.sift.contrast_threshold = f()? as f32,
-        "window" => {
-            cfg.adjust.window = f()? as usize;
-            cfg.matching.track_history = cfg.adjust.window;
-        }
-        "sigma_px" => cfg.sigma_px = f()?,
-        "max_iterations" => cfg.adjust.max_iterations = f()? as usize,
-        "tolerance" => cfg.adjust.tolerance = f()?,
-        "step_angle" => cfg.adjust.step_tolerance[0] = f()?,
-        "step_position" => cfg.adjust.step_tolerance[1] = f()?,
-        "robust_rounds" => cfg.adjust.max_robust_rounds = f()? as usize,
-        "ratio" => cfg.matching.ratio = f()? as f32,
-        "tie_points" => cfg.matching.max_tie_points = f()? as usize,
-        "fine_octave" => cfg.sift.fine_octave = f()? != 0.0,
-        "levels" => cfg.sift.levels = f()? as usize,
-        "edge" => cfg.sift.edge_threshold = f()? as f32,
-        "velocity_sigma" => cfg.adjust.sigmas.velocity_change_mps = f()?,
-        "robust" => {
-            cfg.adjust.robust = if f()? == 0.0 {
-                phototraverse_core::adjust::Robust::None
-            } else {
-                phototraverse_core::adjust::Robust::snooping()
-            }
-        }
-        "max_depth" => cfg.max_depth_m = f()?,
-        "min_ray_angle_deg" => cfg.min_ray_angle_rad = f()?.to_radians(),
-        "refine" => {
-            cfg.matching.refine =
-                (f()? != 0.0).then(|| phototraverse_core::matching::RefineConfig {
-                    rows_only: matches!(
-                        cfg.matching.stereo,
-                        phototraverse_core::matching::StereoGeometry::Rectified { .. }
-                    ),
-                    ..Default::default()
-                })
-        }
-        "temporal_refine" => cfg.temporal_refine = f()? != 0.0,
-        "area" => {
-            cfg.max_area_ties = f()? as usize;
-            cfg.fit_capacities();
-        }
-        "min_ncc" => {
-            if let Some(r) = cfg.matching.refine.as_mut() {
-                r.min_ncc = f()? as f32;
-            }
-        }
-        "back_check" => {
-            if let Some(r) = cfg.matching.refine.as_mut() {
-                r.back_check_px = f()? as f32;
-            }
-        }
-        "estimate_rig" => *cfg = cfg.with_rig_estimation(f()? != 0.0),
-        "keep_exclusions" => cfg.adjust.keep_exclusions = f()? != 0.0,
-        "desc_grid" => cfg.sift.descriptor_grid = f()? as usize,
-        "ori_radius" => cfg.sift.orientation_radius = f()? as f32,
-        "ori_stride" => cfg.sift.orientation_stride_sigma = f()? as f32,
-        "soft_orientation" => cfg.sift.soft_orientation = f()? != 0.0,
-        "octaves" => cfg.sift.octaves = f()? as usize,
-        "grid_cols" => cfg.sift.grid_cols = f()? as usize,
-        "grid_rows" => cfg.sift.grid_rows = f()? as usize,
-        _ => return Err(format!("unknown key {key}; keys: {KEYS}")),
-    }
+    let v = value
+        .parse::<f64>()
+        .map_err(|e| format!("{key}={value}: {e}"))?;
+    set(cfg, v);
     Ok(())
 }
 
@@ -128,7 +148,10 @@ fn main() -> Result<(), String> {
         .filter(|a| a != "--bench")
         .collect();
     if args.is_empty() || args[0] == "--help" {
-        println!("usage: traverse_epoch DATASET [KEY=VALUE ...]\nkeys: {KEYS}");
+        println!(
+            "usage: traverse_epoch DATASET [KEY=VALUE ...]\nkeys: {}",
+            keys()
+        );
         return Ok(());
     }
     let ds = Dataset::open(&PathBuf::from(&args[0])).map_err(|e| e.to_string())?;
@@ -225,7 +248,7 @@ fn main() -> Result<(), String> {
                 m[0], m[1], m[2], m[3], m[4], m[5]
             );
         }
-        if out.flags & 0x40 != 0 {
+        if out.flags & flags::SOLVE_FAILED != 0 {
             eprintln!("{i}: solve failed: {:?}", trav.last_solve_error());
         }
         if std::env::var_os("PT_MATCH_DEBUG").is_some() {

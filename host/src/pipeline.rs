@@ -5,6 +5,7 @@ use phototraverse_core::camera::{Pose, Rig};
 use phototraverse_core::protocol::messages::{
     Configure, Pipeline, TraverseMode, TraverseSettings, CONFIG_VERSION,
 };
+use phototraverse_core::traverse::config::{TRAVERSE_CONTRAST, TRAVERSE_OCTAVES, TRAVERSE_WINDOW};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -100,14 +101,14 @@ impl Default for PipelineSettings {
     fn default() -> Self {
         PipelineSettings {
             keypoints_per_image: 1000,
-            octaves: 4,
+            octaves: TRAVERSE_OCTAVES as u8,
             scales_per_octave: 3,
-            contrast_threshold: phototraverse_core::traverse::config::TRAVERSE_CONTRAST,
+            contrast_threshold: TRAVERSE_CONTRAST,
             fine_octave: false,
             edge_ratio: 10.0,
             match_ratio: 0.8,
             max_disparity_px: None,
-            window: 3,
+            window: TRAVERSE_WINDOW as u16,
             track_capacity: 600,
             mode: Mode::Window,
             estimate_rig: false,

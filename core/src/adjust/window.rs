@@ -1194,12 +1194,7 @@ impl<'a> Window<'a> {
     /// Builds point `p`'s blocks from its observations with weight factors
     /// (`rig`/`scratch` filled for the touched camera blocks). Returns `None`
     /// when the point has no usable observation.
-    fn point_blocks(&mut self, p: usize, want_cam: bool) -> (PointBlocks, f64, usize) {
-        let cams = if want_cam {
-            CamBlocks::Full
-        } else {
-            CamBlocks::None
-        };
+    fn point_blocks(&mut self, p: usize, cams: CamBlocks) -> (PointBlocks, f64, usize) {
         self.point_blocks_with(p, cams, false)
     }
 
@@ -1381,7 +1376,7 @@ impl<'a> Window<'a> {
             if self.points[p].flags & PT_USED == 0 {
                 continue;
             }
-            let (pb, _, _) = self.point_blocks(p, true);
+            let (pb, _, _) = self.point_blocks(p, CamBlocks::Full);
             let Some(vinv) = self.usable_point(p, &pb, lambda) else {
                 continue;
             };
@@ -1446,7 +1441,7 @@ impl<'a> Window<'a> {
                 continue;
             }
             // The point's step needs only its own blocks and the cross blocks W.
-            let (pb, _, _) = self.point_blocks_with(p, CamBlocks::Cross, false);
+            let (pb, _, _) = self.point_blocks(p, CamBlocks::Cross);
             let Some(vinv) = self.usable_point(p, &pb, lambda) else {
                 continue;
             };
@@ -1474,7 +1469,7 @@ impl<'a> Window<'a> {
                 continue;
             }
             self.points[p].flags &= !PT_EXCLUDED;
-            let (pb, _, _) = self.point_blocks(p, false);
+            let (pb, _, _) = self.point_blocks(p, CamBlocks::None);
             let _ = self.usable_point(p, &pb, 0.0);
         }
     }
@@ -1986,7 +1981,7 @@ impl<'a> Window<'a> {
             if self.points[p].flags & PT_USED == 0 {
                 continue;
             }
-            let (pb, _, _) = self.point_blocks(p, false);
+            let (pb, _, _) = self.point_blocks(p, CamBlocks::None);
             let mut vinv = if pb.used >= 2 {
                 sym3_inverse(&pb.v)
             } else {
@@ -2188,7 +2183,7 @@ impl<'a> Window<'a> {
             if self.points[p].flags & (PT_USED | PT_EXCLUDED) != PT_USED {
                 continue;
             }
-            let (pb, _, _) = self.point_blocks_with(p, CamBlocks::Cross, false);
+            let (pb, _, _) = self.point_blocks(p, CamBlocks::Cross);
             let Some(vinv) = sym3_inverse(&pb.v) else {
                 continue;
             };

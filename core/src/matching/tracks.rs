@@ -187,12 +187,11 @@ impl<'a> Tracks<'a> {
             }
             let (p, c) = position(q);
             self.slots[cursor] = Track {
-                id: self.next_id,
+                id: self.allocate_id(),
                 first_epoch: prev,
                 last_epoch: epoch,
                 length: 2,
             };
-            self.next_id = self.next_id.wrapping_add(1) % NONE;
             self.record(cursor, p);
             self.record(cursor, c);
             q.track = cursor as u32;
@@ -202,8 +201,8 @@ impl<'a> Tracks<'a> {
         stats
     }
 
-    /// A fresh identity for a tie point followed outside the table (by area matching),
-    /// so every tie point of the traverse keeps a distinct id.
+    /// A fresh identity: for a new track, and for a tie point followed outside the
+    /// table (by area matching), so every tie point of the traverse keeps a distinct id.
     pub fn allocate_id(&mut self) -> u32 {
         let id = self.next_id;
         self.next_id = self.next_id.wrapping_add(1) % NONE;

@@ -119,18 +119,13 @@ impl RowSamples {
         op: Gradient,
         n: usize,
     ) {
-        let n = lanes(n);
+        let weights = &weights[..lanes(n).min(weights.len())];
+        let m = op.reach();
         // One loop per operator, so each is inlined into its own loop.
         match op {
-            Gradient::Central => {
-                self.gradients_with(rows, r_lo, &weights[..n.min(weights.len())], 1, central)
-            }
-            Gradient::Scharr => {
-                self.gradients_with(rows, r_lo, &weights[..n.min(weights.len())], 1, scharr)
-            }
-            Gradient::Farid => {
-                self.gradients_with(rows, r_lo, &weights[..n.min(weights.len())], 2, farid)
-            }
+            Gradient::Central => self.gradients_with(rows, r_lo, weights, m, central),
+            Gradient::Scharr => self.gradients_with(rows, r_lo, weights, m, scharr),
+            Gradient::Farid => self.gradients_with(rows, r_lo, weights, m, farid),
         }
     }
 

@@ -10,7 +10,7 @@
 use core::f32::consts::PI;
 
 use super::config::{DESC_BINS, DESC_GRID, DESC_ORI_BINS};
-use super::desc_samples::{Frame, RowSamples, NO, P, PADDED};
+use super::desc_samples::{lanes, Frame, RowSamples, NO, P, PADDED};
 use super::fastmath::{floor_i, round_i};
 use super::levels::Levels;
 use crate::features::Descriptor;
@@ -76,7 +76,7 @@ pub fn describe(
     let half = D as f32 * 0.5 - 0.5;
     let mut ucos = [0f32; DESC_GRID];
     let mut usin = [0f32; DESC_GRID];
-    let n = grid.min(DESC_GRID) & !3;
+    let n = lanes(grid);
     for j in 0..n {
         let b = grid_bin(j, n);
         let u = (b - D as f32 * 0.5 + 0.5) * hw;

@@ -28,24 +28,22 @@ pub fn prelim_threshold(contrast: f32, levels: usize) -> i32 {
     libm::floorf(t) as i32
 }
 
-/// Candidates of `row[start..start + 32]` (bit `i` for column `start + i`): beyond
-/// `thr` in magnitude and not below (above, for minima) their row neighbours. Needs
-/// `1 <= start` and `start + 33 <= row.len()`; the 26-neighbour test follows for the
-/// few that pass. Most samples fail, so this filter is the detector's inner loop.
+/// Candidates of `row[start..start + len]`, `len <= 32` (bit `i` for column
+/// `start + i`): beyond `thr` in magnitude and not below (above, for minima) their row
+/// neighbours, which must exist (`1 <= start`, `start + len < row.len()`). The
+/// 26-neighbour test follows for the few that pass. Most samples fail, so this filter
+/// is the detector's inner loop: whole chunks of 32 take the vector path.
 #[inline]
-pub fn candidate_mask(row: &[i16], start: usize, thr: i16) -> u32 {
+pub fn candidate_mask(row: &[i16], start: usize, len: usize, thr: i16) -> u32 {
     #[cfg(target_arch = "x86_64")]
-    {
-        simd::candidate_mask(row, start, thr)
+    if len == 32 && start >= 1 && start + 33 <= row.len() {
+        return simd::candidate_mask(row, start, thr);
     }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        candidate_mask_scalar(row, start, 32, thr)
-    }
+    candidate_mask_scalar(row, start, len, thr)
 }
 
-/// [`candidate_mask`] over `len <= 32` columns, one at a time (the tail of a row, and
-/// the reference of the vector path).
+/// [`candidate_mask`] one column at a time (the tail of a row, other targets, and the
+/// reference of the vector path).
 pub fn candidate_mask_scalar(row: &[i16], start: usize, len: usize, thr: i16) -> u32 {
     let chunk = &row[start..start + len];
     let left = &row[start - 1..start + len - 1];
@@ -63,7 +61,8 @@ pub fn candidate_mask_scalar(row: &[i16], start: usize, len: usize, thr: i16) ->
 mod simd {
     use core::arch::x86_64::*;
 
-    /// [`super::candidate_mask`] eight columns per compare, packed to bits by `movemask`.
+    /// [`super::candidate_mask`] of 32 columns, eight per compare, packed to bits by
+    /// `movemask`; needs `1 <= start` and `start + 33 <= row.len()`.
     pub fn candidate_mask(row: &[i16], start: usize, thr: i16) -> u32 {
         assert!(start >= 1 && start + 33 <= row.len());
         // SAFETY: SSE2 is part of the x86_64 baseline; every load reads columns
@@ -288,7 +287,7 @@ mod tests {
             }
             for start in 1..=row.len() - 33 {
                 assert_eq!(
-                    candidate_mask(&row, start, thr),
+                    candidate_mask(&row, start, 32, thr),
                     candidate_mask_scalar(&row, start, 32, thr),
                     "round {round} start {start}"
                 );

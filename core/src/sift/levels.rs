@@ -15,8 +15,6 @@ pub struct Levels<'x> {
     pub geo: &'x Geometry,
     /// Gradient operator of orientations and descriptors on these levels.
     pub gradient: Gradient,
-    /// Orientation votes split between the two nearest bins.
-    pub soft_votes: bool,
 }
 
 impl<'x> Levels<'x> {

@@ -51,10 +51,7 @@ use crate::image::ImageView;
 use config::{
     base_lens, dog_len, kernel_len, BORDER, DESC_GRID, KERNEL_STRIDE, MAX_RADIUS, REFINE_ROWS,
 };
-use extrema::{
-    candidate_mask, candidate_mask_scalar, is_extremum, prelim_threshold, refine, RefineParams,
-    Refined,
-};
+use extrema::{candidate_mask, is_extremum, prelim_threshold, refine, RefineParams, Refined};
 use levels::Levels;
 use orientation::{orientations, ORI_BINS};
 use pending::{Pending, PendingQueue};
@@ -417,7 +414,6 @@ impl<'a> Sift<'a> {
             h: oct.h,
             geo: if oct.fine { &self.fine } else { &self.geo },
             gradient,
-            soft_votes: self.cfg.soft_orientation,
         };
         for l in 1..=self.cfg.levels {
             let row = |layer: usize, rr: usize| {
@@ -443,11 +439,7 @@ impl<'a> Sift<'a> {
             while start < c1 {
                 let end = (start + 32).min(c1);
                 // Candidates as a bit mask, then visited bit by bit.
-                let mut mask = if end - start == 32 && end < w {
-                    candidate_mask(cur, start, thr16)
-                } else {
-                    candidate_mask_scalar(cur, start, end - start, thr16)
-                };
+                let mut mask = candidate_mask(cur, start, end - start, thr16);
                 while mask != 0 {
                     let i = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
@@ -491,7 +483,6 @@ impl<'a> Sift<'a> {
             h: oct.h,
             geo: if oct.fine { &self.fine } else { &self.geo },
             gradient,
-            soft_votes: self.cfg.soft_orientation,
         };
         let k = (p.level as usize).clamp(1, self.cfg.levels);
         let sigma0 = if oct.fine {

@@ -47,7 +47,7 @@ pub fn orientations(
         1
     };
     let mut samples = WindowRow::default();
-    let soft = lv.soft_votes;
+    let soft = cfg.soft_orientation;
     for i in (-r..=r).step_by(step) {
         let yy = py + i;
         if yy <= 0 || yy >= h - 1 {

@@ -36,9 +36,10 @@ pub fn make_kernel(sigma: f32, radius: usize, taps: &mut [i32]) {
     taps[0] += (1 << KERNEL_BITS) - total;
 }
 
+/// `acc / 2^shift`, rounded, saturated to i16 (as the vector paths' `packs`).
 #[inline]
-fn round_q14(acc: i32) -> i16 {
-    let v = (acc + (1 << (KERNEL_BITS - 1))) >> KERNEL_BITS;
+fn round_shift(acc: i32, shift: u32) -> i16 {
+    let v = (acc + (1 << (shift - 1))) >> shift;
     v.clamp(i16::MIN as i32, i16::MAX as i32) as i16
 }
 
@@ -99,24 +100,45 @@ pub fn convolve(rows: &[&[i16]], taps: &[i32], radius: usize, acc: &mut [i32], o
     #[cfg(not(target_arch = "x86_64"))]
     let done = 0;
     let n = w.min(acc.len());
-    let acc = &mut acc[..n];
-    if done >= acc.len() {
-        return;
+    if done < n {
+        columns_scalar(
+            rows,
+            taps,
+            radius,
+            KERNEL_BITS,
+            &mut acc[done..n],
+            done,
+            &mut out[done..n],
+        );
     }
+}
+
+/// Columns `first..first + out.len()` of the symmetric kernel over `rows`, one at a
+/// time (the tail the vector paths leave, and other targets): the exact integer sums,
+/// rounded and shifted by `shift`.
+fn columns_scalar<T: Copy + Into<i32>>(
+    rows: &[&[T]],
+    taps: &[i32],
+    radius: usize,
+    shift: u32,
+    acc: &mut [i32],
+    first: usize,
+    out: &mut [i16],
+) {
     let k0 = taps[0] as i16 as i32;
-    for (c, a) in acc.iter_mut().enumerate().skip(done) {
-        *a = k0 * rows[radius][c] as i32;
+    for (a, &p) in acc.iter_mut().zip(&rows[radius][first..]) {
+        *a = k0 * p.into();
     }
     for (j, &t) in taps.iter().enumerate().take(radius + 1).skip(1) {
         let kj = t as i16 as i32;
-        let lo = rows[radius - j];
-        let hi = rows[radius + j];
-        for (c, a) in acc.iter_mut().enumerate().skip(done) {
-            *a += kj * (lo[c] as i32 + hi[c] as i32);
+        let lo = &rows[radius - j][first..];
+        let hi = &rows[radius + j][first..];
+        for ((a, &l), &h) in acc.iter_mut().zip(lo).zip(hi) {
+            *a += kj * (l.into() + h.into());
         }
     }
-    for (o, &a) in out.iter_mut().zip(acc.iter()).skip(done) {
-        *o = round_q14(a);
+    for (o, &a) in out.iter_mut().zip(acc.iter()) {
+        *o = round_shift(a, shift);
     }
 }
 
@@ -124,6 +146,36 @@ pub fn convolve(rows: &[&[i16]], taps: &[i32], radius: usize, acc: &mut [i32], o
 mod simd {
     use super::{FRAC_BITS, KERNEL_BITS, MAX_RADIUS};
     use core::arch::x86_64::*;
+
+    /// The centre row and the rows `radius -+ j` (j = 1..=radius) as pointers.
+    struct TapRows<T> {
+        centre: *const T,
+        lo: [*const T; MAX_RADIUS + 1],
+        hi: [*const T; MAX_RADIUS + 1],
+    }
+
+    #[inline(always)]
+    fn tap_rows<T>(rows: &[&[T]], radius: usize) -> TapRows<T> {
+        let centre = rows[radius].as_ptr();
+        let mut t = TapRows {
+            centre,
+            lo: [centre; MAX_RADIUS + 1],
+            hi: [centre; MAX_RADIUS + 1],
+        };
+        for j in 1..=radius {
+            t.lo[j] = rows[radius - j].as_ptr();
+            t.hi[j] = rows[radius + j].as_ptr();
+        }
+        t
+    }
+
+    /// Taps in `madd` pairs (k_2m, k_2m+1) as packed i16 halves, the last odd one with a
+    /// zero: pair 0 multiplies (centre, s_1), pair m (s_2m, s_2m+1).
+    #[inline(always)]
+    fn tap_pairs(taps: &[i32], radius: usize) -> [i32; MAX_RADIUS / 2 + 1] {
+        let tap = |j: usize| if j <= radius { taps[j] & 0xffff } else { 0 };
+        core::array::from_fn(|m| tap(2 * m) | (tap(2 * m + 1) << 16))
+    }
 
     /// Columns `0..w - w % 8` of [`super::convolve`]; returns how many were written.
     pub fn convolve_sse2(
@@ -134,21 +186,14 @@ mod simd {
         start: usize,
     ) -> usize {
         let radius = radius.min(MAX_RADIUS);
-        let centre = rows[radius].as_ptr();
-        // Row pointers of tap j = 1..=radius (left and right of the centre).
-        let mut lp = [centre; MAX_RADIUS + 1];
-        let mut hp = [centre; MAX_RADIUS + 1];
-        for j in 1..=radius {
-            lp[j] = rows[radius - j].as_ptr();
-            hp[j] = rows[radius + j].as_ptr();
-        }
+        let t = tap_rows(rows, radius);
         // SAFETY (both loaders): every row holds at least `out.len()` values (checked by
         // the caller) and `columns` loads columns `c..c + 8` with `c + 8 <= out.len()`.
-        let load = |c: usize| unsafe { _mm_loadu_si128(centre.add(c) as *const __m128i) };
+        let load = |c: usize| unsafe { _mm_loadu_si128(t.centre.add(c) as *const __m128i) };
         let sym = |j: usize, c: usize| unsafe {
             _mm_add_epi16(
-                _mm_loadu_si128(lp[j].add(c) as *const __m128i),
-                _mm_loadu_si128(hp[j].add(c) as *const __m128i),
+                _mm_loadu_si128(t.lo[j].add(c) as *const __m128i),
+                _mm_loadu_si128(t.hi[j].add(c) as *const __m128i),
             )
         };
         columns(taps, radius, KERNEL_BITS, out, start, load, sym)
@@ -158,13 +203,7 @@ mod simd {
     /// on load (`l + h` fits: at most 510), then [`columns`] shifted by 14 - 6.
     pub fn column_u8_sse2(rows: &[&[u8]], taps: &[i32], radius: usize, out: &mut [i16]) -> usize {
         let radius = radius.min(MAX_RADIUS);
-        let centre = rows[radius].as_ptr();
-        let mut lp = [centre; MAX_RADIUS + 1];
-        let mut hp = [centre; MAX_RADIUS + 1];
-        for j in 1..=radius {
-            lp[j] = rows[radius - j].as_ptr();
-            hp[j] = rows[radius + j].as_ptr();
-        }
+        let t = tap_rows(rows, radius);
         // SAFETY: as in `convolve_sse2`; each load reads the 8 bytes `c..c + 8`.
         let widen = |p: *const u8, c: usize| unsafe {
             _mm_unpacklo_epi8(
@@ -172,8 +211,9 @@ mod simd {
                 _mm_setzero_si128(),
             )
         };
-        let load = |c: usize| widen(centre, c);
-        let sym = |j: usize, c: usize| unsafe { _mm_add_epi16(widen(lp[j], c), widen(hp[j], c)) };
+        let load = |c: usize| widen(t.centre, c);
+        let sym =
+            |j: usize, c: usize| unsafe { _mm_add_epi16(widen(t.lo[j], c), widen(t.hi[j], c)) };
         columns(taps, radius, KERNEL_BITS - FRAC_BITS, out, 0, load, sym)
     }
 
@@ -198,13 +238,7 @@ mod simd {
         unsafe {
             let round = _mm_set1_epi32(1 << (shift - 1));
             let count = _mm_cvtsi32_si128(shift as i32);
-            let tap = |j: usize| if j <= radius { taps[j] & 0xffff } else { 0 };
-            // Hoisted per-pair constants: (k_2m, k_2m+1) pairs.
-            let mut kv = [_mm_setzero_si128(); MAX_RADIUS / 2 + 1];
-            let pairs = radius / 2 + 1;
-            for (m, k) in kv.iter_mut().enumerate().take(pairs) {
-                *k = _mm_set1_epi32(tap(2 * m) | (tap(2 * m + 1) << 16));
-            }
+            let kv = tap_pairs(taps, radius).map(|k| _mm_set1_epi32(k));
             let zero = _mm_setzero_si128();
             // Pair 0 is (centre, s_1); full pairs (s_2m, s_2m+1) follow; an even radius
             // leaves s_radius alone with a zero.
@@ -282,21 +316,18 @@ mod simd {
                 // `c + $lanes <= w`.
                 unsafe {
                     let round = $set1(1 << (KERNEL_BITS - 1));
-                    let centre = rows[radius].as_ptr();
-                    let tap = |j: usize| if j <= radius { taps[j] & 0xffff } else { 0 };
+                    let pairs = tap_pairs(taps, radius);
                     let mut kv = [$setzero(); MAX_RADIUS / 2 + 1];
-                    let pairs = radius / 2 + 1;
                     let mut m = 0;
-                    while m < pairs {
-                        kv[m] = $set1(tap(2 * m) | (tap(2 * m + 1) << 16));
+                    while m <= radius / 2 {
+                        kv[m] = $set1(pairs[m]);
                         m += 1;
                     }
-                    let mut lp = [centre; MAX_RADIUS + 1];
-                    let mut hp = [centre; MAX_RADIUS + 1];
-                    for j in 1..=radius {
-                        lp[j] = rows[radius - j].as_ptr();
-                        hp[j] = rows[radius + j].as_ptr();
-                    }
+                    let TapRows {
+                        centre,
+                        lo: lp,
+                        hi: hp,
+                    } = tap_rows(rows, radius);
                     let zero = $setzero();
                     // A macro, not a closure: closures do not inherit `target_feature`,
                     // and the intrinsics would become calls.
@@ -401,42 +432,17 @@ pub fn blur_column_u8<'r>(
     let done = simd::column_u8_sse2(list, taps, radius, &mut out[..w]);
     #[cfg(not(target_arch = "x86_64"))]
     let done = 0;
-    column_u8_scalar(
+    // Q14 taps times 2^6 fractional bits: shift by 14 - 6.
+    let shift = KERNEL_BITS - FRAC_BITS;
+    columns_scalar(
         list,
         taps,
         radius,
+        shift,
         &mut acc[done..w],
         done,
         &mut out[done..w],
     );
-}
-
-/// Columns `first..first + out.len()` of [`blur_column_u8`], one at a time.
-fn column_u8_scalar(
-    rows: &[&[u8]],
-    taps: &[i32],
-    radius: usize,
-    acc: &mut [i32],
-    first: usize,
-    out: &mut [i16],
-) {
-    let k0 = taps[0] as i16 as i32;
-    for (a, &p) in acc.iter_mut().zip(&rows[radius][first..]) {
-        *a = k0 * p as i16 as i32;
-    }
-    for (j, &t) in taps.iter().enumerate().take(radius + 1).skip(1) {
-        let kj = t as i16 as i32;
-        let lo = &rows[radius - j][first..];
-        let hi = &rows[radius + j][first..];
-        for ((a, &l), &h) in acc.iter_mut().zip(lo).zip(hi) {
-            *a += kj * (l as i16 + h as i16) as i32;
-        }
-    }
-    // Q14 taps times 2^6 fractional bits: shift by 14 - 6.
-    let shift = KERNEL_BITS - FRAC_BITS;
-    for (o, &a) in out.iter_mut().zip(acc.iter()) {
-        *o = ((a + (1 << (shift - 1))) >> shift) as i16;
-    }
 }
 
 /// Row `r + j - radius` clamped into `0..h`.
@@ -466,6 +472,34 @@ mod tests {
         }
     }
 
+    /// Widths of the exactness tests: odd and even, below and above the vector lanes.
+    const WIDTHS: [usize; 5] = [1, 7, 8, 29, 64];
+    type Rows = [[i32; 64]; 2 * MAX_RADIUS + 1];
+
+    /// Pseudo-random rows of samples in `0..=max`, about half of them `max` (the
+    /// largest sums).
+    fn sample_rows(seed: &mut u32, max: u32) -> Rows {
+        core::array::from_fn(|_| {
+            core::array::from_fn(|_| {
+                *seed = seed.wrapping_mul(1_103_515_245).wrapping_add(12345);
+                if *seed >> 31 == 1 {
+                    max as i32
+                } else {
+                    ((*seed >> 16) % (max + 1)) as i32
+                }
+            })
+        })
+    }
+
+    /// The scalar definition: the symmetric kernel's exact sum at column `c`.
+    fn exact_sum(taps: &[i32], radius: usize, rows: &Rows, c: usize) -> i32 {
+        let mut sum = taps[0] * rows[radius][c];
+        for j in 1..=radius {
+            sum += taps[j] * (rows[radius - j][c] + rows[radius + j][c]);
+        }
+        sum
+    }
+
     /// The vectorised path (x86_64) gives the integer sums of the scalar definition exactly,
     /// for every radius, odd and even widths and samples up to the largest level value.
     #[test]
@@ -474,30 +508,19 @@ mod tests {
         let mut seed = 12345u32;
         for radius in 0..=MAX_RADIUS {
             make_kernel(0.3 + radius as f32 / 3.0, radius, &mut taps);
-            for &w in &[1usize, 7, 8, 29, 64] {
-                let data: [[i16; 64]; 2 * MAX_RADIUS + 1] = core::array::from_fn(|_| {
-                    core::array::from_fn(|_| {
-                        seed = seed.wrapping_mul(1_103_515_245).wrapping_add(12345);
-                        if seed >> 31 == 1 {
-                            255 * 64
-                        } else {
-                            ((seed >> 16) % (255 * 64 + 1)) as i16
-                        }
-                    })
-                });
-                let rows: [&[i16]; 2 * MAX_RADIUS + 1] = core::array::from_fn(|j| &data[j][..]);
+            for w in WIDTHS {
+                let data = sample_rows(&mut seed, 255 * 64);
+                let data16 = data.map(|r| r.map(|v| v as i16));
+                let rows: [&[i16]; 2 * MAX_RADIUS + 1] = core::array::from_fn(|j| &data16[j][..]);
                 let rows = &rows[..2 * radius + 1];
                 let mut acc = [0i32; 64];
                 let mut out = [0i16; 64];
                 convolve(rows, &taps, radius, &mut acc, &mut out[..w]);
-                for c in 0..w {
-                    let mut sum = taps[0] * rows[radius][c] as i32;
-                    for j in 1..=radius {
-                        sum += taps[j] * (rows[radius - j][c] as i32 + rows[radius + j][c] as i32);
-                    }
+                for (c, &o) in out[..w].iter().enumerate() {
+                    let sum = exact_sum(&taps, radius, &data, c);
                     assert_eq!(
-                        out[c],
-                        round_q14(sum),
+                        o,
+                        round_shift(sum, KERNEL_BITS),
                         "radius {radius} width {w} column {c}"
                     );
                 }
@@ -513,27 +536,16 @@ mod tests {
         let mut seed = 777u32;
         for radius in 0..=MAX_RADIUS {
             make_kernel(0.3 + radius as f32 / 3.0, radius, &mut taps);
-            for &w in &[1usize, 7, 8, 29, 64] {
-                let data: [[u8; 64]; 2 * MAX_RADIUS + 1] = core::array::from_fn(|_| {
-                    core::array::from_fn(|_| {
-                        seed = seed.wrapping_mul(1_103_515_245).wrapping_add(12345);
-                        if seed >> 31 == 1 {
-                            255
-                        } else {
-                            (seed >> 16) as u8
-                        }
-                    })
-                });
+            for w in WIDTHS {
+                let data = sample_rows(&mut seed, 255);
+                let data8 = data.map(|r| r.map(|v| v as u8));
                 let mut acc = [0i32; 64];
                 let mut out = [0i16; 64];
-                blur_column_u8(|j| &data[j][..], &taps, radius, &mut acc, &mut out[..w]);
-                for c in 0..w {
-                    let mut sum = taps[0] * data[radius][c] as i32;
-                    for j in 1..=radius {
-                        sum += taps[j] * (data[radius - j][c] as i32 + data[radius + j][c] as i32);
-                    }
+                blur_column_u8(|j| &data8[j][..], &taps, radius, &mut acc, &mut out[..w]);
+                for (c, &o) in out[..w].iter().enumerate() {
+                    let sum = exact_sum(&taps, radius, &data, c);
                     let expected = ((sum + (1 << 7)) >> 8) as i16;
-                    assert_eq!(out[c], expected, "radius {radius} width {w} column {c}");
+                    assert_eq!(o, expected, "radius {radius} width {w} column {c}");
                 }
             }
         }

@@ -61,6 +61,15 @@ pub struct TraverseConfig {
     pub max_area_ties: usize,
 }
 
+/// Scale-space octaves of the traverse: four reach keypoints of sigma 25 px at 640x480,
+/// far beyond what stays matchable between epochs.
+pub const TRAVERSE_OCTAVES: usize = 4;
+
+/// Epochs in the traverse's adjustment window: with the tie points carried on by area
+/// matching, longer windows cost in proportion and gave no better drift on the rendered
+/// streets (docs/traverse.md, "Window length").
+pub const TRAVERSE_WINDOW: usize = 3;
+
 /// Descriptor samples per axis in the traverse ([`SiftConfig::descriptor_grid`]).
 pub const TRAVERSE_DESCRIPTOR_GRID: usize = 12;
 
@@ -82,9 +91,7 @@ impl TraverseConfig {
             max_width: w as usize,
             max_height: h as usize,
             max_keypoints,
-            // Four octaves reach keypoints of sigma 25 px at 640x480, far beyond what
-            // stays matchable between epochs (the pipeline settings' default too).
-            octaves: 4,
+            octaves: TRAVERSE_OCTAVES,
             contrast_threshold: TRAVERSE_CONTRAST,
             // Descriptors only pair the features; positions come from the NCC refinement.
             // 12 x 12 gradient samples instead of 20 x 20 cost 2.4x less per descriptor
@@ -113,10 +120,7 @@ impl TraverseConfig {
         });
         matching.max_tie_points = MAX_TIE_POINTS;
         matching.max_tracks = 600;
-        // Three epochs: with the tie points carried on by area matching, longer windows
-        // cost in proportion and gave no better drift on the rendered streets
-        // (docs/configuration.md, "Window length").
-        let window = 3;
+        let window = TRAVERSE_WINDOW;
         matching.track_history = window;
         let adjust = AdjustConfig {
             window,

@@ -364,9 +364,7 @@ impl<'a> Traverse<'a> {
         let adjusted =
             self.adjust_epoch(k, (time_s, aux), &prediction, images, &mut out, clock, t2);
         // The templates of this image serve the next epoch only if it is in the window.
-        let added = self
-            .prev_window_epoch
-            .filter(|_| self.prev_window_epoch != before);
+        let added = self.prev_window_epoch.filter(|&e| Some(e) != before);
         self.store_patches(fill, left, added);
         out.settle(adjusted);
         self.history = [
