@@ -88,6 +88,9 @@ pub fn traverse_config(c: &Configure) -> Result<TraverseConfig, BuildError> {
     cfg.adjust.window = window;
     cfg.matching.track_history = window;
     cfg.matching.max_tracks = (p.track_capacity as usize).max(1);
+    if let Some(f) = p.fixed_epochs {
+        cfg.adjust.fixed_epochs = f as usize;
+    }
     // The mode's own settings (seed window lengths included) come last, then the
     // capacities that follow from the window.
     // A seed mode's window length wins over the rig estimation's minimum.

@@ -100,6 +100,14 @@ const SETTERS: &[(&str, Setter)] = &[
         c.max_area_ties = v as usize;
         c.fit_capacities();
     }),
+    ("fixed_epochs", |c, v| {
+        c.adjust.fixed_epochs = v as usize;
+        c.fit_capacities();
+    }),
+    ("prior_inflation", |c, v| {
+        c.adjust.carried_prior_inflation = v
+    }),
+    ("anchor_scale", |c, v| c.max_anchor_scale = v as f32),
     ("estimate_rig", |c, v| *c = c.with_rig_estimation(v != 0.0)),
     ("desc_grid", |c, v| c.sift.descriptor_grid = v as usize),
     ("ori_radius", |c, v| c.sift.orientation_radius = v as f32),
@@ -187,6 +195,7 @@ fn main() -> Result<(), String> {
     let mut flag_list = Vec::new();
     let (mut kps, mut stereo) = (Vec::new(), Vec::new());
     let mut poses = Vec::new();
+    let mut smoothed = Vec::new();
     for i in 0..ds.len() {
         let (l, r) = ds.load_pair(i).map_err(|e| e.to_string())?;
         let (lv, rv) = (l.view().unwrap(), r.view().unwrap());
@@ -264,6 +273,18 @@ fn main() -> Result<(), String> {
             flag_list.push(format!("{i}:{:#x}", out.flags));
         }
         poses.push(kitti_from_pose(&ds.datum, &out.left));
+        // The window's refinements of earlier epochs (the last one is final).
+        for (input, pose, _) in trav.window_epochs() {
+            let k = input as usize;
+            if k < smoothed.len() {
+                smoothed[k] = kitti_from_pose(&ds.datum, &pose);
+            } else if k == smoothed.len() {
+                smoothed.push(kitti_from_pose(&ds.datum, &pose));
+            }
+        }
+        while smoothed.len() < poses.len() {
+            smoothed.push(poses[smoothed.len()]);
+        }
     }
     println!("{} epochs of {}, one thread (CPU time)", ds.len(), args[0]);
     println!("{:<12} {:>9} {:>9}", "stage", "median ms", "p90 ms");
@@ -290,6 +311,10 @@ fn main() -> Result<(), String> {
         phototraverse_host::poses::write_poses(&path, &poses).map_err(|e| e.to_string())?;
     }
     if let Some(gt) = &ds.ground_truth {
+        let e = evaluate(gt, &smoothed).map_err(|e| e.to_string())?;
+        println!("window-refined poses:");
+        print!("{}", e.summary());
+        println!("poses as output at their epoch:");
         let e = evaluate(gt, &poses).map_err(|e| e.to_string())?;
         print!("{}", e.summary());
     }

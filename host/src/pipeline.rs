@@ -5,7 +5,9 @@ use phototraverse_core::camera::{Pose, Rig};
 use phototraverse_core::protocol::messages::{
     Configure, Pipeline, TraverseMode, TraverseSettings, CONFIG_VERSION,
 };
-use phototraverse_core::traverse::config::{TRAVERSE_CONTRAST, TRAVERSE_OCTAVES, TRAVERSE_WINDOW};
+use phototraverse_core::traverse::config::{
+    TRAVERSE_CONTRAST, TRAVERSE_FIXED_EPOCHS, TRAVERSE_OCTAVES, TRAVERSE_WINDOW,
+};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -70,6 +72,7 @@ impl DatumSettings {
 /// max_disparity_px = 320.0     # rectified rigs: disparity search range
 /// window = 3                   # epochs in the adjustment window
 /// track_capacity = 600         # tracks kept at once
+/// fixed_epochs = 8             # epochs that left the window whose observations still count
 /// mode = "window"              # window, seed2014, seed2006
 /// estimate_rig = false         # estimate the relative orientation
 /// sigma_px = 0.5               # a-priori image sigma, pixels
@@ -90,6 +93,7 @@ pub struct PipelineSettings {
     pub max_disparity_px: Option<f32>,
     pub window: u16,
     pub track_capacity: u32,
+    pub fixed_epochs: u16,
     pub mode: Mode,
     pub estimate_rig: bool,
     pub sigma_px: f64,
@@ -110,6 +114,7 @@ impl Default for PipelineSettings {
             max_disparity_px: None,
             window: TRAVERSE_WINDOW as u16,
             track_capacity: 600,
+            fixed_epochs: TRAVERSE_FIXED_EPOCHS as u16,
             mode: Mode::Window,
             estimate_rig: false,
             sigma_px: 0.5,
@@ -150,6 +155,7 @@ impl PipelineSettings {
             "match_ratio must be in (0, 1]"
         );
         anyhow::ensure!(self.window >= 2, "window must be at least 2 epochs");
+        anyhow::ensure!(self.fixed_epochs <= 64, "fixed_epochs must be at most 64");
         anyhow::ensure!(
             self.track_capacity >= 8,
             "track_capacity must be at least 8"
@@ -200,6 +206,7 @@ impl PipelineSettings {
                 match_ratio: self.match_ratio,
                 max_disparity_px: self.max_disparity_px.unwrap_or(w as f32 * 0.5),
                 fine_octave: self.fine_octave,
+                fixed_epochs: Some(self.fixed_epochs),
             },
         }
     }

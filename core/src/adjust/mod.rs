@@ -40,6 +40,8 @@ pub mod weighting;
 pub mod window;
 
 #[cfg(test)]
+mod bias_tests;
+#[cfg(test)]
 mod tests;
 
 pub use geometry::{Camera, InteriorCorrections, RigParams};

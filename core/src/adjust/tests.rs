@@ -14,7 +14,7 @@ use std::vec;
 use std::vec::Vec;
 
 /// Deterministic uniform and normal numbers (no std RNG in the core).
-pub(crate) struct Rng(u64);
+pub(crate) struct Rng(pub(crate) u64);
 impl Rng {
     pub(crate) fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
         self.0 = self

@@ -169,6 +169,14 @@ pub struct AdjustConfig {
     /// stay as the starting set (snooping may readmit them) and the Cauchy rounds are
     /// skipped, so an epoch only pays for the blunders its own observations bring.
     pub keep_exclusions: bool,
+    /// Epochs that left the window whose observations still constrain the points
+    /// (their poses held fixed), 0 drops a leaving epoch's observations with it.
+    /// See [`Window::slide`].
+    pub fixed_epochs: usize,
+    /// The carried prior of the window's first epoch is its marginal covariance times
+    /// this factor (>= 1: the covariance also holds the information of observations
+    /// that stay in the window, so it counts them twice at factor 1).
+    pub carried_prior_inflation: f64,
 }
 
 impl Default for AdjustConfig {
@@ -186,6 +194,8 @@ impl Default for AdjustConfig {
             tolerance: 1e-12,
             step_tolerance: [0.0; 2],
             keep_exclusions: false,
+            fixed_epochs: 0,
+            carried_prior_inflation: 1.0,
         }
     }
 }
@@ -349,6 +359,23 @@ const PT_USED: u32 = 1;
 const PT_PRIOR: u32 = 2;
 const PT_EXCLUDED: u32 = 4;
 
+/// A pose that left the window, kept fixed while its observations still count.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Pod, Zeroable)]
+struct FixedSlot {
+    /// Local parameters (the window's origin), as the epoch left the window.
+    params: [f64; 6],
+    /// Cached rotation and derivatives of `params` (see [`Rotations`]).
+    rot: [f64; 36],
+}
+
+/// Where an observation's epoch is: a window slot (adjusted) or a fixed slot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum At {
+    Window(usize),
+    Fixed(usize),
+}
+
 /// Per camera block scratch of one point: `W` (6x3), the block's own `U`
 /// (6x6), its cross blocks with the rig and with the interior orientation
 /// (6x6 each, `J_this^T P J_other`) and its gradient.
@@ -426,6 +453,9 @@ pub struct Window<'a> {
     origin: [f64; 3],
     epochs: &'a mut [EpochSlot],
     n_epochs: usize,
+    /// Epochs that left the window, oldest first: ids `first_id - n_fixed ..`.
+    fixed: &'a mut [FixedSlot],
+    n_fixed: usize,
     first_id: u32,
     points: &'a mut [PointSlot],
     n_point_slots: usize,
@@ -471,6 +501,11 @@ impl AdjustConfig {
             "adjust.epochs",
             ComponentKind::Storage,
             bytes::<EpochSlot>(w),
+        );
+        budget.add(
+            "adjust.fixed_epochs",
+            ComponentKind::Storage,
+            bytes::<FixedSlot>(self.fixed_epochs),
         );
         budget.add(
             "adjust.points",
@@ -520,7 +555,10 @@ impl AdjustConfig {
             && s.datum_position_m > 0.0
             && (!self.estimate_rig || (s.rig_angle_rad > 0.0 && s.rig_base_m > 0.0))
             && self.self_calibration.is_none_or(|c| c.valid())
-            && self.tolerance.is_finite();
+            && self.tolerance.is_finite()
+            && self.fixed_epochs <= 4096
+            && self.carried_prior_inflation >= 1.0
+            && self.carried_prior_inflation.is_finite();
         if ok {
             Ok(())
         } else {
@@ -571,6 +609,7 @@ impl<'a> Window<'a> {
         let nc = cfg.cam_capacity();
         let (p, o, w) = (cfg.max_points, cfg.max_observations, cfg.window);
         let epochs = arena.alloc_slice::<EpochSlot>(w)?;
+        let fixed = arena.alloc_slice::<FixedSlot>(cfg.fixed_epochs)?;
         let points = arena.alloc_slice::<PointSlot>(p)?;
         let obs = arena.alloc_slice::<Observation>(o)?;
         let point_start = arena.alloc_slice::<u32>(p + 1)?;
@@ -602,6 +641,8 @@ impl<'a> Window<'a> {
             origin: [0.0; 3],
             epochs,
             n_epochs: 0,
+            fixed,
+            n_fixed: 0,
             first_id: 0,
             points,
             n_point_slots: 0,
@@ -680,6 +721,32 @@ impl<'a> Window<'a> {
     fn slot_of(&self, epoch: u32) -> Option<usize> {
         let s = epoch.checked_sub(self.first_id)? as usize;
         (s < self.n_epochs).then_some(s)
+    }
+
+    /// The window slot or the fixed slot of an epoch id.
+    fn locate(&self, epoch: u32) -> Option<At> {
+        if let Some(s) = self.slot_of(epoch) {
+            return Some(At::Window(s));
+        }
+        let back = self.first_id.checked_sub(epoch)? as usize;
+        (back >= 1 && back <= self.n_fixed).then(|| At::Fixed(self.n_fixed - back))
+    }
+
+    /// Cached rotations and local centre of the pose at `at`.
+    fn pose_parts(&self, at: At) -> (Rotations, [f64; 3]) {
+        let (rot, p) = match at {
+            At::Window(s) => (&self.epochs[s].rot, &self.epochs[s].params),
+            At::Fixed(s) => (&self.fixed[s].rot, &self.fixed[s].params),
+        };
+        (Rotations(*rot), [p[3], p[4], p[5]])
+    }
+
+    /// Local parameters of the pose at `at`.
+    fn params_at(&self, at: At) -> [f64; 6] {
+        match at {
+            At::Window(s) => self.epochs[s].params,
+            At::Fixed(s) => self.fixed[s].params,
+        }
     }
 
     /// A prior on an epoch's pose (object coordinates) with standard
@@ -948,8 +1015,7 @@ impl<'a> Window<'a> {
     /// Residuals `observed - computed` (mm) of an observation at the current state.
     pub fn residual(&self, index: usize) -> Option<[f64; 2]> {
         let o = self.obs.get(index).filter(|_| index < self.n_obs)?;
-        let slot = self.slot_of(o.epoch)?;
-        let pose = Pose::from_params(&self.epochs[slot].params);
+        let pose = Pose::from_params(&self.params_at(self.locate(o.epoch)?));
         let cam = Camera::from_index(o.camera)?;
         let pr = project_rig(
             &pose,
@@ -980,28 +1046,61 @@ impl<'a> Window<'a> {
 
     // ----- sliding -----
 
-    /// Drops the oldest epoch (fixed at its current pose): its observations
-    /// leave, points left without observations are freed, and the new oldest
-    /// epoch gets its current pose and covariance as a prior. The origin moves
-    /// to the new oldest epoch. Returns the dropped epoch's final pose.
+    /// Drops the oldest epoch (fixed at its current pose). With
+    /// [`AdjustConfig::fixed_epochs`], its observations stay while their points are
+    /// observed in the window, so a point keeps what every epoch of its track told
+    /// about it (the poses that left are fixed: their observations constrain the
+    /// points only), and the oldest fixed epoch's observations leave in its place;
+    /// without, its observations leave with it. Points left without an observation
+    /// in the window are freed, and the new oldest epoch gets its current pose and
+    /// covariance as a prior. The origin moves to the new oldest epoch. Returns the
+    /// dropped epoch's final pose.
     pub fn slide(&mut self) -> Result<Pose, AdjustError> {
         if self.n_epochs < 2 {
             return Err(AdjustError::TooFewEpochs);
         }
         let dropped = self.epoch_pose(0).ok_or(AdjustError::TooFewEpochs)?;
         let gone = self.epochs[0].id;
+        let cap = self.cfg.fixed_epochs;
+        let expired = if cap == 0 {
+            Some(gone)
+        } else {
+            let e = &self.epochs[0];
+            let slot = FixedSlot {
+                params: e.params,
+                rot: Rotations::new(e.params[0], e.params[1], e.params[2]).0,
+            };
+            let expired = (self.n_fixed == cap).then(|| gone.wrapping_sub(cap as u32));
+            if self.n_fixed == cap {
+                self.fixed.copy_within(1..cap, 0);
+                self.n_fixed -= 1;
+            }
+            self.fixed[self.n_fixed] = slot;
+            self.n_fixed += 1;
+            expired
+        };
+        // Observations in the window per point, after this slide (point_start is
+        // scratch until the next build_index).
+        let np = self.n_point_slots;
+        self.point_start[..np].fill(0);
+        for o in &self.obs[..self.n_obs] {
+            if o.epoch != gone && self.slot_of(o.epoch).is_some() {
+                self.point_start[o.point as usize] += 1;
+            }
+        }
         let mut k = 0;
         for i in 0..self.n_obs {
             let o = self.obs[i];
-            if o.epoch == gone {
+            let keep = Some(o.epoch) != expired && self.point_start[o.point as usize] > 0;
+            if keep {
+                self.obs[k] = o;
+                k += 1;
+            } else {
                 let p = &mut self.points[o.point as usize];
                 p.nobs = p.nobs.saturating_sub(1);
                 if p.nobs == 0 && p.flags & PT_PRIOR == 0 {
                     p.flags = 0;
                 }
-            } else {
-                self.obs[k] = o;
-                k += 1;
             }
         }
         self.n_obs = k;
@@ -1010,6 +1109,10 @@ impl<'a> Window<'a> {
         let next = &mut self.epochs[1];
         let mut info = [0.0; 36];
         let have = next.flags & EP_COV != 0 && invert6(&next.cov, &mut info);
+        if have {
+            let k = 1.0 / self.cfg.carried_prior_inflation;
+            info.iter_mut().for_each(|v| *v *= k);
+        }
         if !have {
             let s = self.cfg.sigmas;
             for i in 0..6 {
@@ -1087,6 +1190,11 @@ impl<'a> Window<'a> {
                 e.gnss[a] -= shift[a];
             }
         }
+        for f in self.fixed[..self.n_fixed].iter_mut() {
+            for a in 0..3 {
+                f.params[3 + a] -= shift[a];
+            }
+        }
         for p in self.points[..self.n_point_slots].iter_mut() {
             for a in 0..3 {
                 p.xyz[a] -= shift[a];
@@ -1139,22 +1247,13 @@ impl<'a> Window<'a> {
     #[inline]
     fn project(
         &self,
-        slot: usize,
+        at: At,
         cam: Camera,
         xyz: &[f64; 3],
     ) -> Result<super::geometry::RigProjection, crate::camera::CameraError> {
-        let e = &self.epochs[slot];
-        let c = [e.params[3], e.params[4], e.params[5]];
+        let (rot, c) = self.pose_parts(at);
         let f = corrected_focal(self.focal, cam, &self.interior);
-        let pr = project_with(
-            &Rotations(e.rot),
-            &c,
-            &self.rig_rot,
-            &self.rig.base,
-            cam,
-            f,
-            xyz,
-        )?;
+        let pr = project_with(&rot, &c, &self.rig_rot, &self.rig.base, cam, f, xyz)?;
         Ok(with_interior(pr, cam, f, &self.interior))
     }
 
@@ -1229,7 +1328,7 @@ impl<'a> Window<'a> {
             if !(o.factor > 0.0) {
                 continue;
             }
-            let Some(slot) = self.slot_of(o.epoch) else {
+            let Some(at) = self.locate(o.epoch) else {
                 continue;
             };
             let cam = if o.camera == 0 {
@@ -1237,7 +1336,7 @@ impl<'a> Window<'a> {
             } else {
                 Camera::Right
             };
-            let pr = match self.project(slot, cam, &xyz) {
+            let pr = match self.project(at, cam, &xyz) {
                 Ok(pr) => pr,
                 Err(_) => {
                     self.obs[oi].flags |= Observation::BEHIND;
@@ -1260,6 +1359,8 @@ impl<'a> Window<'a> {
                     }
                 }
             }
+            // A fixed epoch's observation constrains the point only.
+            let At::Window(slot) = at else { continue };
             if !want_cam {
                 continue;
             }
@@ -1641,26 +1742,17 @@ impl<'a> Window<'a> {
             if !(o.factor > 0.0) || pt.flags & (PT_USED | PT_EXCLUDED) != PT_USED {
                 continue;
             }
-            let Some(slot) = self.slot_of(o.epoch) else {
+            let Some(at) = self.locate(o.epoch) else {
                 continue;
             };
-            let e = &self.epochs[slot];
+            let (rot, c) = self.pose_parts(at);
             let cam = if o.camera == 0 {
                 Camera::Left
             } else {
                 Camera::Right
             };
-            let c = [e.params[3], e.params[4], e.params[5]];
             let f = corrected_focal(self.focal, cam, &self.interior);
-            match project_xy(
-                &Rotations(e.rot),
-                &c,
-                &self.rig_rot,
-                &self.rig.base,
-                cam,
-                f,
-                &pt.xyz,
-            ) {
+            match project_xy(&rot, &c, &self.rig_rot, &self.rig.base, cam, f, &pt.xyz) {
                 Some(xy) => {
                     let xy = shift_principal_point(xy, cam, &self.interior);
                     let r = [o.xy[0] as f64 - xy[0], o.xy[1] as f64 - xy[1]];
@@ -2042,7 +2134,7 @@ impl<'a> Window<'a> {
     fn statistic(&self, oi: usize, vinv: Option<&Matrix3<f64>>, all: bool) -> f64 {
         let o = &self.obs[oi];
         let Some(vinv) = vinv else { return 0.0 };
-        let Some(slot) = self.slot_of(o.epoch) else {
+        let Some(at) = self.locate(o.epoch) else {
             return 0.0;
         };
         let cam = if o.camera == 0 {
@@ -2051,7 +2143,7 @@ impl<'a> Window<'a> {
             Camera::Right
         };
         let xyz = self.points[o.point as usize].xyz;
-        let Ok(pr) = self.project(slot, cam, &xyz) else {
+        let Ok(pr) = self.project(at, cam, &xyz) else {
             return f64::INFINITY;
         };
         let r = [o.xy[0] as f64 - pr.xy[0], o.xy[1] as f64 - pr.xy[1]];
@@ -2113,7 +2205,7 @@ impl<'a> Window<'a> {
                 let o = &self.obs[self.obs_order[k] as usize];
                 if o.factor > 0.0
                     && o.flags & Observation::BEHIND == 0
-                    && self.slot_of(o.epoch).is_some()
+                    && self.locate(o.epoch).is_some()
                 {
                     n_obs += 1;
                 }

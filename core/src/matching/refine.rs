@@ -234,6 +234,44 @@ pub fn sample_template(
     Ok(())
 }
 
+/// The template `tpl` (half-size `h`) as it appears `scale` (>= 1) times larger: each
+/// sample is read (bilinear) from the original at `1 / scale` of its distance to the
+/// centre, so the centre stays the same surface point. A scale below 1 would read
+/// outside the template and is refused, as is one above 2.
+pub fn magnify_template(
+    tpl: &[f32; TEMPLATE_LEN],
+    h: usize,
+    scale: f32,
+    out: &mut [f32; TEMPLATE_LEN],
+) -> bool {
+    let h = h.min(MAX_REFINE_HALF);
+    if h == 0 || !(scale.is_finite() && (1.0..=2.0).contains(&scale)) {
+        return false;
+    }
+    let (n, hf) = (2 * h + 1, h as f32);
+    let inv = 1.0 / scale;
+    for v in 0..n {
+        let y = hf + (v as f32 - hf) * inv;
+        let (r, fy) = split(y, n);
+        for u in 0..n {
+            let x = hf + (u as f32 - hf) * inv;
+            let (c, fx) = split(x, n);
+            let at = |rr: usize, cc: usize| tpl[rr * n + cc];
+            let top = at(r, c) * (1.0 - fx) + at(r, c + 1) * fx;
+            let bot = at(r + 1, c) * (1.0 - fx) + at(r + 1, c + 1) * fx;
+            out[v * n + u] = top * (1.0 - fy) + bot * fy;
+        }
+    }
+    true
+}
+
+/// Whole and fractional parts of a template coordinate, the whole part kept below
+/// `n - 1` so its right (or lower) neighbour exists.
+fn split(x: f32, n: usize) -> (usize, f32) {
+    let i = (x.max(0.0) as usize).min(n - 2);
+    (i, x - i as f32)
+}
+
 /// Correlates the template `tpl` (half-size `h`, as [`sample_template`] wrote it) with
 /// `img` at whole-pixel offsets up to `(rx, ry)` around `centre`; a parabola through the
 /// peak and its neighbours gives the sub-pixel position on each searched axis.

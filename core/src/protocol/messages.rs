@@ -300,7 +300,7 @@ repr!(
 
 /// Payload version of [`Configure`] this build writes. Later versions append
 /// fields; a parser reads the fields it knows and ignores the rest.
-pub const CONFIG_VERSION: u16 = 2;
+pub const CONFIG_VERSION: u16 = 3;
 
 /// Pipeline capacities and thresholds, plain numbers the traverse maps to its config.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -322,7 +322,13 @@ pub struct Pipeline {
     /// keypoints and half the drift for twice the extractor's time, same memory
     /// (v2 flags bit 1).
     pub fine_octave: bool,
+    /// Epochs that left the window whose observations still count (v3); `None`
+    /// keeps the firmware's default.
+    pub fixed_epochs: Option<u16>,
 }
+
+/// The v3 `fixed_epochs` value that says "the firmware's default".
+const FIRMWARE_DEFAULT_U16: u16 = u16::MAX;
 
 impl Default for Pipeline {
     fn default() -> Self {
@@ -340,6 +346,7 @@ impl Default for Pipeline {
             match_ratio: 0.8,
             max_disparity_px: 128.0,
             fine_octave: false,
+            fixed_epochs: None,
         }
     }
 }
@@ -435,6 +442,7 @@ repr!(
             match_ratio: r.f32()?,
             max_disparity_px: r.f32()?,
             fine_octave: false,
+            fixed_epochs: None,
         };
         let mut traverse = TraverseSettings::default();
         let mut pipeline = pipeline;
@@ -447,6 +455,10 @@ repr!(
                 TraverseMode::from_code(code).ok_or(ParseError::Invalid("traverse mode"))?;
             traverse.estimate_rig = flags & CONFIG_ESTIMATE_RIG != 0;
             pipeline.fine_octave = flags & CONFIG_FINE_OCTAVE != 0;
+        }
+        if version >= 3 {
+            let f = r.u16()?;
+            pipeline.fixed_epochs = (f != FIRMWARE_DEFAULT_U16).then_some(f);
         }
         // Fields of later versions follow; this build ignores them.
         let _ = r.rest();
@@ -489,6 +501,9 @@ repr!(
             w.u8(rig_flag | octave_flag)?;
             w.f64(t.sigma_px)?;
             w.f64s(&t.datum)?;
+        }
+        if s.version >= 3 {
+            w.u16(p.fixed_epochs.unwrap_or(FIRMWARE_DEFAULT_U16))?;
         }
     }
 );

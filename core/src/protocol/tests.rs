@@ -336,6 +336,27 @@ fn configure_v2_round_trips_and_v1_payloads_get_the_v1_behaviour() {
             ..v2.pipeline
         }
     );
+    // v3 appends the fixed epochs; v2 and older leave the firmware's default.
+    let v3 = Configure {
+        version: 3,
+        pipeline: Pipeline {
+            fixed_epochs: Some(5),
+            ..v2.pipeline
+        },
+        ..v2
+    };
+    let n3 = v3.emit(&mut payload).unwrap();
+    assert_eq!(n3, 303);
+    assert_eq!(Configure::parse(&payload[..n3]).unwrap(), v3);
+    let firmware_default = Configure {
+        pipeline: Pipeline {
+            fixed_epochs: None,
+            ..v3.pipeline
+        },
+        ..v3
+    };
+    let n3 = firmware_default.emit(&mut payload).unwrap();
+    assert_eq!(Configure::parse(&payload[..n3]).unwrap(), firmware_default);
     assert_eq!(back.traverse, TraverseSettings::default());
     assert_eq!(back.traverse.mode, TraverseMode::Window);
     assert!(!back.traverse.estimate_rig);

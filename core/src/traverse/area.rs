@@ -17,7 +17,7 @@ use super::patches::{PatchInfo, NO_ID};
 use super::Traverse;
 use crate::camera::{project_to_pixel, Pose};
 use crate::image::ImageView;
-use crate::matching::refine::{correlate, refine_checked, refine_scaled, TEMPLATE_LEN};
+use crate::matching::refine::{correlate, refine_checked, TEMPLATE_LEN};
 use bytemuck::{Pod, Zeroable};
 
 /// A tie point found by area matching.
@@ -99,13 +99,17 @@ impl Traverse<'_> {
             let Some(([pl, pr], scale)) = self.predict(&prev, &cur, key, &info) else {
                 continue;
             };
-            if !patches.template(i, &mut tpl) {
+            // From the anchor epoch, not the previous one, where the template was taken.
+            let scale = match (patches.anchor_depth(i), scale) {
+                (Some(a), (_, now)) => a / now,
+                (None, (before, now)) => before / now,
+            };
+            if !super::template_at_scale(patches, i, scale, &mut tpl) {
                 continue;
             }
             let Ok((l, _)) = correlate(&tpl, patches.half(), left, pl, (r, r), rcfg.min_ncc) else {
                 continue;
             };
-            let l = rescaled(&tpl, patches.half(), left, (pl, l), scale, rcfg.min_ncc);
             let Ok((right_px, _)) = refine_checked(left, right, l, pr, &rcfg) else {
                 continue;
             };
@@ -126,14 +130,14 @@ impl Traverse<'_> {
     }
 
     /// Current left and right pixel positions predicted for a template's point, and
-    /// how much larger it appears now (previous depth over current depth).
+    /// its depths at the previous epoch and now (metres).
     fn predict(
         &self,
         prev: &[Pose; 2],
         cur: &[Pose; 2],
         key: [f32; 2],
         info: &PatchInfo,
-    ) -> Option<([[f32; 2]; 2], f32)> {
+    ) -> Option<([[f32; 2]; 2], (f32, f32))> {
         let xyz = if info.point != NO_ID {
             self.window.point(info.point)?
         } else {
@@ -147,7 +151,7 @@ impl Traverse<'_> {
         let l = project_to_pixel(&cur[0], &self.cfg.rig.left, &xyz).ok()?;
         let r = project_to_pixel(&cur[1], &self.cfg.rig.right, &xyz).ok()?;
         let px = |p: [f64; 2]| [p[0] as f32, p[1] as f32];
-        Some(([px(l), px(r)], (before / depth) as f32))
+        Some(([px(l), px(r)], (before as f32, depth as f32)))
     }
 
     /// Adds the area tie points to the window epoch `id` (the previous one is
@@ -180,29 +184,6 @@ impl Traverse<'_> {
         }
         new_points
     }
-}
-
-/// Scale changes below this are left to the plain correlation.
-const MIN_RESCALE: f32 = 0.01;
-
-/// The correlation peak `found` of a search around `predicted`, refined for the scale
-/// change of an approached surface (its template was taken a step earlier and
-/// farther away); the unscaled peak when the change is small or the refinement fails.
-fn rescaled(
-    tpl: &[f32; TEMPLATE_LEN],
-    half: usize,
-    img: &ImageView,
-    (predicted, found): ([f32; 2], [f32; 2]),
-    scale: f32,
-    min_ncc: f32,
-) -> [f32; 2] {
-    if (scale - 1.0).abs() < MIN_RESCALE {
-        return found;
-    }
-    // The whole-pixel position of the peak on the search grid.
-    let grid = |p: f32, f: f32| p + libm::roundf(f - p);
-    let centre = [grid(predicted[0], found[0]), grid(predicted[1], found[1])];
-    refine_scaled(tpl, half, img, centre, scale, min_ncc).map_or(found, |(p, _)| p)
 }
 
 /// A template's metadata for an area tie point of the current epoch.

@@ -59,6 +59,10 @@ pub struct TraverseConfig {
     /// points that no descriptor quad continued, looked for around their predicted
     /// positions (needs `temporal_refine`; see `traverse::area`); 0 turns it off.
     pub max_area_ties: usize,
+    /// A tie point's template is carried on from its anchor epoch while the point
+    /// appears at most this many times larger or smaller; 1 re-takes it at every
+    /// epoch (see `traverse::patches`).
+    pub max_anchor_scale: f32,
 }
 
 /// Scale-space octaves of the traverse: four reach keypoints of sigma 25 px at 640x480,
@@ -69,6 +73,14 @@ pub const TRAVERSE_OCTAVES: usize = 4;
 /// matching, longer windows cost in proportion and gave no better drift on the rendered
 /// streets (docs/traverse.md, "Window length").
 pub const TRAVERSE_WINDOW: usize = 3;
+
+/// Epochs that left the window whose observations still constrain their points
+/// ([`AdjustConfig::fixed_epochs`]).
+pub const TRAVERSE_FIXED_EPOCHS: usize = 8;
+
+/// Inflation of the carried prior of the window's first epoch
+/// ([`AdjustConfig::carried_prior_inflation`]).
+pub const TRAVERSE_PRIOR_INFLATION: f64 = 1000.0;
 
 /// Descriptor samples per axis in the traverse ([`SiftConfig::descriptor_grid`]).
 pub const TRAVERSE_DESCRIPTOR_GRID: usize = 12;
@@ -144,6 +156,8 @@ impl TraverseConfig {
             // of 1e-8: no confirming iteration is needed.
             step_tolerance: [1e-4, 1e-3],
             keep_exclusions: true,
+            fixed_epochs: TRAVERSE_FIXED_EPOCHS,
+            carried_prior_inflation: TRAVERSE_PRIOR_INFLATION,
             ..AdjustConfig::default()
         };
         let mut cfg = TraverseConfig {
@@ -162,6 +176,7 @@ impl TraverseConfig {
             prediction_sigmas: [0.01, 0.01, 0.01, 0.3, 0.3, 0.3],
             temporal_refine: true,
             max_area_ties: usize::MAX,
+            max_anchor_scale: super::patches::MAX_ANCHOR_SCALE,
         };
         cfg.fit_capacities();
         cfg
@@ -187,7 +202,9 @@ impl TraverseConfig {
         let t = m.max_tie_points;
         let w = self.adjust.window.max(1);
         self.adjust.max_points = t.saturating_mul(w);
-        self.adjust.max_observations = t.saturating_mul(w).saturating_mul(4);
+        // Observations of the epochs that left the window: two per tie point each.
+        let fixed = t.saturating_mul(self.adjust.fixed_epochs).saturating_mul(2);
+        self.adjust.max_observations = t.saturating_mul(w).saturating_mul(4).saturating_add(fixed);
         self.sift.pending_capacity = self
             .sift
             .max_width

@@ -36,7 +36,7 @@ use crate::budget::{Arena, OutOfMemory};
 use crate::camera::Pose;
 use crate::features::FeatureSet;
 use crate::image::ImageView;
-use crate::matching::refine::{correlate, refine_checked, TEMPLATE_LEN};
+use crate::matching::refine::{correlate, magnify_template, refine_checked, TEMPLATE_LEN};
 use crate::matching::{
     relative_motion, EpochStatus as MatchStatus, Features, MatchError, Matcher, StereoFeatures,
     TiePoint,
@@ -75,6 +75,8 @@ pub struct TrackPoint {
 #[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
 pub struct Refined {
     pub slot: u32,
+    /// The template (patch store index) the position was found with.
+    pub entry: u32,
     pub left: [f32; 2],
     pub right: [f32; 2],
 }
@@ -161,6 +163,8 @@ pub struct Traverse<'a> {
     /// Tie points found by area matching at this epoch (`area`), the first `n_area`.
     area: &'a mut [AreaTie],
     n_area: usize,
+    /// Tie points of this epoch found with their template (`refined`), the first `n_refined`.
+    n_refined: usize,
     /// Input epoch index of each window slot (oldest first).
     window_inputs: &'a mut [u32],
     epochs: u32,
@@ -213,6 +217,7 @@ impl<'a> Traverse<'a> {
             refined,
             area,
             n_area: 0,
+            n_refined: 0,
             window_inputs,
             epochs: 0,
             have_prev: false,
@@ -329,6 +334,7 @@ impl<'a> Traverse<'a> {
                 return self.finish(out, t0, clock);
             }
         };
+        self.n_refined = 0;
         if report.status != MatchStatus::RepeatedFrame {
             self.refine_temporal(left, right);
         }
@@ -454,8 +460,9 @@ impl<'a> Traverse<'a> {
             .process_epoch(cur, prev, images, motion.as_ref().map(|m| (&rig, m)))
     }
 
-    /// Moves each tie point's current left position onto the spot its previous left
-    /// template shows, then re-refines the right position from there (see `patches`).
+    /// Moves each tie point's current left position onto the spot its left template
+    /// shows (magnified by the point's scale change since the template's anchor
+    /// epoch), then re-refines the right position from there (see `patches`).
     fn refine_temporal(&mut self, left: &ImageView, right: &ImageView) {
         let (Some(patches), Some(rcfg)) = (&self.patches, self.cfg.matching.refine) else {
             return;
@@ -465,7 +472,15 @@ impl<'a> Traverse<'a> {
         let mut tpl = [0f32; TEMPLATE_LEN];
         let mut n = 0;
         for tie in self.matcher.tie_points() {
-            if n >= self.refined.len() || !patches.find(tie.prev.left, &mut tpl) {
+            if n >= self.refined.len() {
+                break;
+            }
+            let Some(entry) = patches.index_of(tie.prev.left) else {
+                continue;
+            };
+            let now = stereo_depth(&self.cfg, &self.window, tie.cur.left, tie.cur.right);
+            let scale = anchor_scale(patches.anchor_depth(entry), now);
+            if !template_at_scale(patches, entry, scale, &mut tpl) {
                 continue;
             }
             let Ok((l, _)) = correlate(&tpl, h, left, tie.cur.left, (rad, rad), rcfg.min_ncc)
@@ -477,49 +492,83 @@ impl<'a> Traverse<'a> {
             };
             self.refined[n] = Refined {
                 slot: tie.slot,
+                entry: entry as u32,
                 left: l,
                 right: r,
             };
             n += 1;
         }
+        self.n_refined = n;
         for r in self.refined[..n].iter() {
             self.matcher.refine_tie_point(r.slot, r.left, r.right);
         }
     }
 
-    /// Keeps the templates the next epoch's tie points will start from: the tie points'
-    /// current (refined) positions, those found by area, and the other stereo matches'
-    /// left keypoints, in that order of priority; `epoch` is this image's window epoch.
+    /// Renews the templates the next epoch's tie points will start from (`epoch` is
+    /// this image's window epoch): the tie points found with a template carry it on
+    /// while their scale allows (see `patches`); the other tie points, those found by
+    /// area and the other stereo matches' left keypoints get a new template, in that
+    /// order of priority.
     fn store_patches(&mut self, fill: usize, left: &ImageView, epoch: Option<u32>) {
         let Some(patches) = &mut self.patches else {
             return;
         };
-        patches.clear(epoch);
+        patches.begin(epoch);
         if epoch.is_none() {
             return;
         }
-        for tie in self.matcher.tie_points() {
-            let info = match known_point(self.track_points, &tie) {
-                Some(point) => PatchInfo {
-                    right: tie.cur.right,
-                    tag: tie.track_id,
-                    point,
-                },
-                None => PatchInfo::stereo(tie.cur.right),
+        let limit = self.cfg.max_anchor_scale;
+        let (cfg, window) = (&self.cfg, &self.window);
+        let carry = |patches: &Patches, entry: usize, at: ([f32; 2], [f32; 2])| {
+            let now = stereo_depth(cfg, window, at.0, at.1);
+            let s = anchor_scale(patches.anchor_depth(entry), now);
+            // A receding point would need a template larger than the anchor's.
+            s <= limit && s >= 1.0 - SAME_SCALE
+        };
+        // The tie points' templates: first every carried one (their slots must not be
+        // overwritten), then the new ones.
+        for r in self.refined[..self.n_refined].iter() {
+            let entry = r.entry as usize;
+            let Some(tie) = self.matcher.tie_points().find(|t| t.slot == r.slot) else {
+                continue;
             };
-            patches.push(left, tie.cur.left, info);
+            if tie.cur.left != r.left || !carry(patches, entry, (r.left, r.right)) {
+                continue;
+            }
+            let info = tie_info(self.track_points, &tie);
+            patches.keep(entry, tie.cur.left, info);
         }
         for a in self.area[..self.n_area]
             .iter()
             .filter(|a| a.point != patches::NO_ID)
         {
-            patches.push(left, a.left, a.into());
+            if carry(patches, a.entry as usize, (a.left, a.right)) {
+                patches.keep(a.entry as usize, a.left, a.into());
+            }
+        }
+        for tie in self.matcher.tie_points() {
+            if patches.index_of(tie.cur.left).is_some() {
+                continue;
+            }
+            let info = tie_info(self.track_points, &tie);
+            let depth = stereo_depth(cfg, window, tie.cur.left, tie.cur.right);
+            patches.push(left, tie.cur.left, info, depth);
+        }
+        for a in self.area[..self.n_area]
+            .iter()
+            .filter(|a| a.point != patches::NO_ID)
+        {
+            if patches.index_of(a.left).is_none() {
+                let depth = stereo_depth(cfg, window, a.left, a.right);
+                patches.push(left, a.left, a.into(), depth);
+            }
         }
         let quads = self.matcher.quads();
         let kps = self.features[fill][0].keypoints();
         for m in self.matcher.stereo_matches(kps) {
             if !quads.iter().any(|q| q.cur_left == m.left) {
-                patches.push(left, m.left_px, PatchInfo::stereo(m.right_px));
+                let depth = stereo_depth(cfg, window, m.left_px, m.right_px);
+                patches.push(left, m.left_px, PatchInfo::stereo(m.right_px), depth);
             }
         }
     }
@@ -714,6 +763,64 @@ impl<'a> Traverse<'a> {
             libm::sqrt(sum / n as f64)
         }
     }
+}
+
+/// What a tie point's template shows: its window point when its track has one.
+fn tie_info(map: &[TrackPoint], tie: &TiePoint) -> PatchInfo {
+    match known_point(map, tie) {
+        Some(point) => PatchInfo {
+            right: tie.cur.right,
+            tag: tie.track_id,
+            point,
+        },
+        None => PatchInfo::stereo(tie.cur.right),
+    }
+}
+
+/// Depth (metres, along the left camera's axis) of a stereo observation, from the
+/// rig as last adjusted; `None` when the rays barely intersect (a far point).
+fn stereo_depth(
+    cfg: &TraverseConfig,
+    window: &Window,
+    left: [f32; 2],
+    right: [f32; 2],
+) -> Option<f32> {
+    let d = cfg.datum;
+    let poses = [d, camera_pose(&d, &window.rig(), Camera::Right)];
+    let x = intersect_pair(cfg, &poses, left, right)?;
+    Some(-d.to_camera(&x)[2] as f32)
+}
+
+/// How many times larger a point appears now than at its template's anchor epoch,
+/// from the two depths; 1 when either is unknown (a far point).
+fn anchor_scale(anchor: Option<f32>, now: Option<f32>) -> f32 {
+    match (anchor, now) {
+        (Some(a), Some(n)) if n > 0.0 => a / n,
+        _ => 1.0,
+    }
+}
+
+/// Scale changes below this are left to the correlation (a template's extent changes
+/// by less than a tenth of a pixel).
+const SAME_SCALE: f32 = 0.02;
+
+/// Template `entry` of the store as it appears `scale` times larger into `out`;
+/// false when there is no such template or it would have to shrink.
+fn template_at_scale(
+    patches: &Patches,
+    entry: usize,
+    scale: f32,
+    out: &mut [f32; TEMPLATE_LEN],
+) -> bool {
+    let mut anchor = [0f32; TEMPLATE_LEN];
+    if !patches.template(entry, &mut anchor) {
+        return false;
+    }
+    if (scale - 1.0).abs() < SAME_SCALE {
+        *out = anchor;
+        return true;
+    }
+    magnify_template(&anchor, patches.half(), scale, out)
 }
 
 /// The window point of a tie point's track, if the track already has one.

@@ -1,13 +1,23 @@
-//! Templates of the previous epoch's left image around its stereo-matched points, so
-//! a tie point's current left position can be found by area matching against the
-//! very spot observed before (the frames themselves are not kept).
+//! Templates of the left image around its stereo-matched points, so a tie point's
+//! current left position can be found by area matching against the very spot observed
+//! before (the frames themselves are not kept).
 //!
 //! Why: the detector places a keypoint slightly differently as the view changes
 //! (perspective and scale change of the surface around it), and between epochs that
 //! difference is systematic (outward with forward motion), which the adjustment turns
-//! into a drift of pitch and scale. Correlating the previous template puts the current
-//! observation on the same surface point; the stereo refinement then carries it to the
-//! right image.
+//! into a drift of pitch and scale. Correlating a template puts the current observation
+//! on the surface point the template shows; the stereo refinement then carries it to
+//! the right image.
+//!
+//! A tie point's template is its *anchor*: taken once, where the track was first
+//! observed, and carried from epoch to epoch while the point's apparent scale stays
+//! within [`MAX_ANCHOR_SCALE`] of the anchor's (the template is magnified by the scale
+//! before it is correlated). Re-taking the template at each epoch's measured position
+//! would let every measurement error move the track over the surface: the observations
+//! of one window point would then be of a random walk of surface points (the transfer
+//! error grew as `0.17 px x sqrt(epochs)` on the rendered streets), and a window longer
+//! than two epochs could add no information. Each template keeps the depth of its point
+//! at the anchor epoch, which gives the scale.
 //!
 //! Each template also remembers what it is a view of ([`PatchInfo`]): its right
 //! position at the same epoch and the window point it already is, if any, so the
@@ -46,12 +56,27 @@ impl PatchInfo {
     }
 }
 
+/// A template is carried on while its point appears at most this many times larger
+/// (or `1 / MAX_ANCHOR_SCALE` smaller) than at its anchor epoch; beyond, it is re-taken.
+/// The magnified anchor loses detail against the current image as the scale grows,
+/// and the perspective change of an oblique surface, which the magnification ignores,
+/// grows with it.
+pub const MAX_ANCHOR_SCALE: f32 = 1.3;
+
 /// Templates keyed by the pixel position the matcher reports for them next epoch.
+/// Slots persist across epochs (a carried anchor keeps its samples); a round of
+/// [`Patches::begin`], [`Patches::keep`] and [`Patches::push`] renews the store.
 pub struct Patches<'a> {
     keys: &'a mut [[f32; 2]],
     info: &'a mut [PatchInfo],
+    /// Depth of the template's point at its anchor epoch, metres (0: unknown, far).
+    depth: &'a mut [f32],
+    /// Whether the slot holds a template of the current round.
+    live: &'a mut [u8],
     samples: &'a mut [u16],
+    /// Slots in use are below `n`; `cursor` is where `push` looks for a free one.
     n: usize,
+    cursor: usize,
     half: usize,
     dropped: u32,
     /// Window epoch id of the image the templates come from.
@@ -76,6 +101,11 @@ impl<'a> Patches<'a> {
             slice_bytes::<PatchInfo>(capacity),
         );
         budget.add(
+            "traverse.patch_anchor",
+            ComponentKind::Storage,
+            slice_bytes::<f32>(capacity) + slice_bytes::<u8>(capacity),
+        );
+        budget.add(
             "traverse.patches",
             ComponentKind::Storage,
             slice_bytes::<u16>(capacity * len),
@@ -87,20 +117,46 @@ impl<'a> Patches<'a> {
         Ok(Patches {
             keys: arena.alloc_slice(capacity)?,
             info: arena.alloc_slice(capacity)?,
+            depth: arena.alloc_slice(capacity)?,
+            live: arena.alloc_slice(capacity)?,
             samples: arena.alloc_slice(capacity * len)?,
             n: 0,
+            cursor: 0,
             half,
             dropped: 0,
             epoch: None,
         })
     }
 
-    /// Empties the store for the templates of window epoch `epoch` (`None`: an image
-    /// that is not in the window, whose templates must not be used).
-    pub fn clear(&mut self, epoch: Option<u32>) {
-        self.n = 0;
+    /// Starts the round of window epoch `epoch`: every template becomes stale until
+    /// [`Patches::keep`] carries it on, and [`Patches::push`] fills the stale slots.
+    /// `None` (an image that is not in the window) empties the store.
+    pub fn begin(&mut self, epoch: Option<u32>) {
+        self.live[..self.n].fill(0);
+        if epoch.is_none() {
+            self.n = 0;
+        }
+        self.cursor = 0;
         self.dropped = 0;
         self.epoch = epoch;
+    }
+
+    /// Carries template `i` of the last round on, now seen at `key` with `info`;
+    /// false when there is no such template.
+    pub fn keep(&mut self, i: usize, key: [f32; 2], info: PatchInfo) -> bool {
+        if i >= self.n {
+            return false;
+        }
+        self.live[i] = 1;
+        self.keys[i] = key;
+        self.info[i] = info;
+        true
+    }
+
+    /// Depth of template `i`'s point at its anchor epoch (metres), if known.
+    pub fn anchor_depth(&self, i: usize) -> Option<f32> {
+        let d = *self.depth[..self.n].get(i)?;
+        (self.live[i] != 0 && d > 0.0).then_some(d)
     }
 
     /// Window epoch id the templates were taken at.
@@ -126,9 +182,20 @@ impl<'a> Patches<'a> {
         self.dropped
     }
 
-    /// Stores the template around `at` in `img`; false when full or at the border.
-    pub fn push(&mut self, img: &ImageView<'_>, at: [f32; 2], info: PatchInfo) -> bool {
-        if self.n >= self.keys.len() {
+    /// Anchors a new template around `at` in `img` in a free slot, its point `depth`
+    /// metres away (`None`: unknown); false when full or at the border.
+    pub fn push(
+        &mut self,
+        img: &ImageView<'_>,
+        at: [f32; 2],
+        info: PatchInfo,
+        depth: Option<f32>,
+    ) -> bool {
+        while self.cursor < self.keys.len() && self.cursor < self.n && self.live[self.cursor] != 0 {
+            self.cursor += 1;
+        }
+        let slot = self.cursor;
+        if slot >= self.keys.len() {
             self.dropped = self.dropped.saturating_add(1);
             return false;
         }
@@ -137,19 +204,21 @@ impl<'a> Patches<'a> {
             return false;
         }
         let len = side(self.half) * side(self.half);
-        let dst = &mut self.samples[self.n * len..(self.n + 1) * len];
+        let dst = &mut self.samples[slot * len..(slot + 1) * len];
         for (d, &v) in dst.iter_mut().zip(&tpl[..len]) {
             *d = (v * SCALE + 0.5) as u16;
         }
-        self.keys[self.n] = at;
-        self.info[self.n] = info;
-        self.n += 1;
+        self.keys[slot] = at;
+        self.info[slot] = info;
+        self.depth[slot] = depth.filter(|d| d.is_finite() && *d > 0.0).unwrap_or(0.0);
+        self.live[slot] = 1;
+        self.n = self.n.max(slot + 1);
         true
     }
 
     /// Index of the template stored at exactly `key`.
     pub fn index_of(&self, key: [f32; 2]) -> Option<usize> {
-        self.keys[..self.n].iter().position(|k| *k == key)
+        (0..self.n).find(|&i| self.live[i] != 0 && self.keys[i] == key)
     }
 
     /// The template stored at exactly `key`, expanded into `out`.
@@ -157,19 +226,19 @@ impl<'a> Patches<'a> {
         self.index_of(key).is_some_and(|i| self.template(i, out))
     }
 
-    /// Position (pixels) of template `i` in its image.
+    /// Position (pixels) of template `i` at the last round's epoch.
     pub fn key(&self, i: usize) -> Option<[f32; 2]> {
-        self.keys[..self.n].get(i).copied()
+        (i < self.n && self.live[i] != 0).then(|| self.keys[i])
     }
 
     /// What template `i` shows.
     pub fn info(&self, i: usize) -> Option<PatchInfo> {
-        self.info[..self.n].get(i).copied()
+        (i < self.n && self.live[i] != 0).then(|| self.info[i])
     }
 
-    /// Template `i`, expanded into `out`; false when there is no such template.
+    /// Template `i` (as anchored), expanded into `out`; false when there is no such template.
     pub fn template(&self, i: usize, out: &mut [f32; TEMPLATE_LEN]) -> bool {
-        if i >= self.n {
+        if i >= self.n || self.live[i] == 0 {
             return false;
         }
         let len = side(self.half) * side(self.half);
@@ -192,15 +261,18 @@ mod tests {
         let mut store = [0u8; 4096];
         let mut arena = Arena::new(&mut store);
         let mut p = Patches::new(&mut arena, 2, 2).unwrap();
+        p.begin(Some(0));
         let info = PatchInfo {
             right: [4.0, 12.5],
             tag: 7,
             point: 3,
         };
-        assert!(p.push(&view, [10.25, 12.5], info));
-        assert!(!p.push(&view, [0.5, 0.5], info), "border");
-        assert!(p.push(&view, [20.0, 15.0], PatchInfo::stereo([12.0, 15.0])));
-        assert!(!p.push(&view, [21.0, 15.0], info), "full");
+        assert!(p.push(&view, [10.25, 12.5], info, Some(12.0)));
+        assert!(!p.push(&view, [0.5, 0.5], info, None), "border");
+        assert!(p.push(&view, [20.0, 15.0], PatchInfo::stereo([12.0, 15.0]), None));
+        assert!(!p.push(&view, [21.0, 15.0], info, None), "full");
+        assert_eq!(p.anchor_depth(0), Some(12.0));
+        assert_eq!(p.anchor_depth(1), None);
         assert_eq!(p.info(0), Some(info));
         assert_eq!(p.info(1).map(|i| i.point), Some(NO_ID));
         assert_eq!(p.index_of([20.0, 15.0]), Some(1));
