@@ -754,3 +754,28 @@ fn motion_check_removes_consistent_wrong_loops() {
     assert!(motion::check_motion(&rig, &cfg, &obs[..5], &mut pts, &mut few, 1).is_none());
     assert!(few.iter().all(|&f| f == 1));
 }
+
+#[test]
+fn magnified_template_keeps_its_centre_and_scales_a_ramp() {
+    use super::refine::{magnify_template, TEMPLATE_LEN};
+    let h = 4usize;
+    let n = 2 * h + 1;
+    let mut tpl = [0f32; TEMPLATE_LEN];
+    for v in 0..n {
+        for u in 0..n {
+            tpl[v * n + u] = 3.0 * u as f32 + 7.0 * v as f32;
+        }
+    }
+    let mut out = [0f32; TEMPLATE_LEN];
+    assert!(magnify_template(&tpl, h, 1.0, &mut out));
+    assert_eq!(out[..n * n], tpl[..n * n]);
+    assert!(magnify_template(&tpl, h, 2.0, &mut out));
+    let centre = h * n + h;
+    assert!((out[centre] - tpl[centre]).abs() < 1e-4);
+    // Twice as large: half the slope on each axis, around the same centre.
+    assert!((out[centre + 1] - out[centre] - 1.5).abs() < 1e-4);
+    assert!((out[centre + n] - out[centre] - 3.5).abs() < 1e-4);
+    // Shrinking would read outside the template: refused.
+    assert!(!magnify_template(&tpl, h, 0.9, &mut out));
+    assert!(!magnify_template(&tpl, 0, 1.5, &mut out));
+}

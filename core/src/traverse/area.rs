@@ -34,6 +34,10 @@ pub struct AreaTie {
     pub right: [f32; 2],
 }
 
+/// Predicted left and right pixels of a template's point, and its depths (metres) at
+/// the previous epoch and now.
+type Prediction = ([[f32; 2]; 2], (f32, f32));
+
 /// Two observations closer than this (pixels, each axis) are the same image point.
 const SAME_POINT_PX: f32 = 1.0;
 /// Correlation search radius around the predicted left position, whole pixels: a
@@ -137,7 +141,7 @@ impl Traverse<'_> {
         cur: &[Pose; 2],
         key: [f32; 2],
         info: &PatchInfo,
-    ) -> Option<([[f32; 2]; 2], (f32, f32))> {
+    ) -> Option<Prediction> {
         let xyz = if info.point != NO_ID {
             self.window.point(info.point)?
         } else {

@@ -288,4 +288,44 @@ mod tests {
         );
         assert!(!p.find([10.0, 12.5], &mut t));
     }
+
+    #[test]
+    fn a_round_carries_kept_templates_and_fills_the_stale_slots() {
+        let (w, h) = (40usize, 30usize);
+        let a: [u8; 1200] = core::array::from_fn(|i| ((i % w) * 5 + (i / w) * 3) as u8);
+        let b: [u8; 1200] = core::array::from_fn(|i| (200 - (i % w) * 2) as u8);
+        let (va, vb) = (
+            ImageView::new(&a, w, h).unwrap(),
+            ImageView::new(&b, w, h).unwrap(),
+        );
+        let mut store = [0u8; 4096];
+        let mut arena = Arena::new(&mut store);
+        let mut p = Patches::new(&mut arena, 2, 2).unwrap();
+        p.begin(Some(0));
+        assert!(p.push(&va, [10.0, 10.0], PatchInfo::stereo([5.0, 10.0]), Some(8.0)));
+        assert!(p.push(
+            &va,
+            [20.0, 12.0],
+            PatchInfo::stereo([15.0, 12.0]),
+            Some(9.0)
+        ));
+        let mut anchor = [0f32; TEMPLATE_LEN];
+        assert!(p.template(1, &mut anchor));
+        // Next epoch: template 1 is carried on to a new position, slot 0 is re-used.
+        p.begin(Some(1));
+        assert_eq!(p.key(0), None, "stale until kept");
+        assert!(p.keep(1, [22.0, 12.5], PatchInfo::stereo([16.0, 12.5])));
+        assert!(p.push(&vb, [30.0, 15.0], PatchInfo::stereo([25.0, 15.0]), None));
+        assert!(!p.push(&vb, [31.0, 15.0], PatchInfo::stereo([26.0, 15.0]), None));
+        assert_eq!(p.index_of([22.0, 12.5]), Some(1));
+        assert_eq!(p.index_of([30.0, 15.0]), Some(0));
+        assert_eq!(p.index_of([20.0, 12.0]), None, "the old key is gone");
+        let mut t = [0f32; TEMPLATE_LEN];
+        assert!(p.template(1, &mut t));
+        assert_eq!(t, anchor, "a carried template keeps its anchor samples");
+        assert_eq!(p.anchor_depth(1), Some(9.0));
+        // An image outside the window empties the store.
+        p.begin(None);
+        assert!(p.is_empty() && p.key(1).is_none());
+    }
 }
