@@ -255,7 +255,8 @@ mod tests {
         );
         let dataset = Pose::from_degrees(90.0, 0.0, 0.0, [1.0, 2.0, 3.0]);
         let c = s.configure_for(&rig, &dataset);
-        assert_eq!(c.version, 2);
+        assert_eq!(c.version, CONFIG_VERSION);
+        assert_eq!(c.pipeline.fixed_epochs, Some(TRAVERSE_FIXED_EPOCHS as u16));
         assert_eq!(c.traverse.mode, TraverseMode::Seed2006);
         assert!(c.traverse.estimate_rig);
         assert_eq!(c.traverse.sigma_px, 0.8);

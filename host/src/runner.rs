@@ -465,6 +465,7 @@ fn flag_note(f: u32) -> Option<String> {
         (flags::SOLVE_FAILED, "adjustment failed"),
         (flags::BAD_IMAGE, "image refused"),
         (flags::CAPACITY, "capacity reached"),
+        (flags::RELOCALIZED, "relocalized"),
     ];
     let words: Vec<&str> = names
         .iter()

@@ -177,6 +177,9 @@ pub struct Matcher<'a> {
     /// Epoch counter (incremented by each accepted epoch).
     epoch: u32,
     has_prev: bool,
+    /// Temporal matches of the last epoch, per side (left, right): a guided pass far
+    /// below them has been misled by its prediction (see [`Matcher::temporal`]).
+    last_temporal: [u32; 2],
     /// The last stereo result is in `cur` (a standalone or rejected epoch), else in `prev`.
     stereo_in_cur: bool,
     n_tie: usize,
@@ -210,6 +213,7 @@ impl<'a> Matcher<'a> {
             cfg,
             epoch: 0,
             has_prev: false,
+            last_temporal: [0; 2],
             stereo_in_cur: false,
             n_tie: 0,
         })
@@ -404,17 +408,25 @@ impl<'a> Matcher<'a> {
             }
             s
         };
+        let side = right_side as usize;
+        let guided_region = GuidedWindow {
+            predicted: Some(&pred[..np]),
+            window: self.cfg.temporal_window_px,
+            fallback: self.cfg.fallback_window_px,
+            predicted_only: true,
+        };
+        // A guided pass is trusted unless it finds fewer than the absolute minimum, or
+        // under half of the last epoch's matches: a wrong prediction (the onset of a
+        // turn, a jolt) finds a few, and partly wrong, matches inside its windows.
+        let enough = (self.cfg.min_temporal_matches as u32).max(self.last_temporal[side] / 2);
+        let mut guided_stats = None;
         if guided {
-            let region = GuidedWindow {
-                predicted: Some(&pred[..np]),
-                window: self.cfg.temporal_window_px,
-                fallback: self.cfg.fallback_window_px,
-                predicted_only: true,
-            };
-            let s = run(&region, out, dist);
-            if s.matches as usize >= self.cfg.min_temporal_matches {
+            let s = run(&guided_region, out, dist);
+            if s.matches >= enough {
+                self.last_temporal[side] = s.matches;
                 return (s, TemporalMode::Guided);
             }
+            guided_stats = Some(s);
         }
         let region = GuidedWindow {
             predicted: None,
@@ -422,7 +434,18 @@ impl<'a> Matcher<'a> {
             fallback: self.cfg.fallback_window_px,
             predicted_only: false,
         };
-        (run(&region, out, dist), TemporalMode::Fallback)
+        out.fill(NONE);
+        let s = run(&region, out, dist);
+        if let Some(g) = guided_stats.filter(|g| g.matches > s.matches) {
+            // The prediction was right after all, the scene poorer: keep the guided pass.
+            out.fill(NONE);
+            let s = run(&guided_region, out, dist);
+            debug_assert_eq!(s.matches, g.matches);
+            self.last_temporal[side] = s.matches;
+            return (s, TemporalMode::Guided);
+        }
+        self.last_temporal[side] = s.matches;
+        (s, TemporalMode::Fallback)
     }
 
     /// Matches one epoch. `prev` must be the features passed as `cur` in the last
@@ -677,6 +700,27 @@ impl<'a> Matcher<'a> {
         self.has_prev = true;
         self.stereo_in_cur = false;
         core::mem::swap(&mut self.prev, &mut self.cur);
+    }
+
+    /// After an accepted epoch: the previous epoch's stereo matches whose left keypoint
+    /// the left temporal pass found again, as (previous left pixel, previous right
+    /// pixel, current left keypoint index). Unlike the tie points, these need no closed
+    /// quad: the material of a relocalization when the quads are too few.
+    pub fn temporal_stereo<'s>(
+        &'s self,
+        prev_left: &'s [crate::features::Keypoint],
+    ) -> impl Iterator<Item = ([f32; 2], [f32; 2], u32)> + 's {
+        // After `accept_epoch`, the previous epoch's stereo results are in `cur`.
+        let side = &self.cur;
+        let n = side
+            .n_left
+            .min(prev_left.len())
+            .min(self.left_temporal.len());
+        (0..n).filter_map(move |i| {
+            let c = self.left_temporal[i];
+            (side.right_of[i] != NONE && c != NONE)
+                .then(|| ([prev_left[i].x, prev_left[i].y], side.right_px[i], c))
+        })
     }
 
     /// The tie points of the last accepted epoch.

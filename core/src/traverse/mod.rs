@@ -586,7 +586,13 @@ impl<'a> Traverse<'a> {
         t_start: u64,
     ) -> bool {
         let first = self.window.n_epochs() == 0 && self.history[1].is_none();
-        let resected = if first { None } else { self.resect() };
+        let mut resected = if first { None } else { self.resect() };
+        if !first && resected.is_none() {
+            resected = self.relocalize();
+            if resected.is_some() {
+                out.flags |= flags::RELOCALIZED;
+            }
+        }
         let initial = match resected {
             Some(pose) => pose,
             None if first => self.cfg.datum,
@@ -663,6 +669,38 @@ impl<'a> Traverse<'a> {
             };
             let [c, r] = tie.cur.left;
             let xy = self.cfg.rig.left.pixel_to_corrected(c as f64, r as f64);
+            self.corr[n] = Correspondence { point: xyz, xy };
+            n += 1;
+        }
+        let mut rcfg = self.cfg.resection;
+        rcfg.threshold_mm = 3.0 * self.cfg.sigma_px * self.cfg.rig.left.pixel_size_mm[0];
+        let r = resect(&self.corr[..n], self.cfg.rig.left.focal_mm, &rcfg).ok()?;
+        (r.inliers >= self.cfg.min_tie_points).then_some(r.pose)
+    }
+
+    /// Resection of the current left camera on the previous stereo pair's points that
+    /// the temporal matching found again, quads or not (`Matcher::temporal_stereo`):
+    /// when the motion prediction was wrong (the onset of a turn, a jolt), the guided
+    /// search closes few quads, but the fallback search still pairs many keypoints.
+    /// The points are intersected from the previous window epoch's pose.
+    fn relocalize(&mut self) -> Option<Pose> {
+        let last = self.window.n_epochs().checked_sub(1)?;
+        let prev_left = self.window.epoch_pose(last)?;
+        let prev = [prev_left, self.right_of(&prev_left)];
+        let cur = self.features[self.cur][0].keypoints();
+        let prev_kps = self.features[1 - self.cur][0].keypoints();
+        let mut n = 0;
+        for (pl, pr, c) in self.matcher.temporal_stereo(prev_kps) {
+            if n >= self.corr.len() {
+                break;
+            }
+            let (Some(k), Some(xyz)) = (
+                cur.get(c as usize),
+                intersect_pair(&self.cfg, &prev, pl, pr),
+            ) else {
+                continue;
+            };
+            let xy = self.cfg.rig.left.pixel_to_corrected(k.x as f64, k.y as f64);
             self.corr[n] = Correspondence { point: xyz, xy };
             n += 1;
         }

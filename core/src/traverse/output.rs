@@ -23,6 +23,9 @@ pub mod flags {
     pub const CAPACITY: u32 = 1 << 8;
     /// Informational: the resection failed and the motion prediction started the adjustment.
     pub const NO_RESECTION: u32 = 1 << 9;
+    /// Informational: the tie points did not resect the camera; it was found again by a
+    /// resection on the previous stereo pair's points matched without the motion prior.
+    pub const RELOCALIZED: u32 = 1 << 10;
 
     /// Flags that make an epoch count as flagged (the informational ones do not).
     pub const FLAGGING: u32 = FEW_TIE_POINTS
