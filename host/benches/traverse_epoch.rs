@@ -202,7 +202,8 @@ fn main() -> Result<(), String> {
         let out = trav.process(
             &lv,
             &rv,
-            ds.epochs[i].time.unwrap_or(i as f64 * 0.1),
+            // As the link carries it: whole microseconds (runner.rs).
+            ((ds.epochs[i].time.unwrap_or(i as f64 * 0.1) * 1e6).max(0.0) as u64) as f64 * 1e-6,
             &ThreadClock,
         );
         let t = out.times;
@@ -259,6 +260,23 @@ fn main() -> Result<(), String> {
         }
         if out.flags & flags::SOLVE_FAILED != 0 {
             eprintln!("{i}: solve failed: {:?}", trav.last_solve_error());
+        }
+        if std::env::var_os("PT_OBS_DEBUG").is_some() {
+            let mut seen = std::collections::BTreeMap::new();
+            for j in 0..trav.window_observation_count() {
+                if let Some(o) = trav.window_observation(j) {
+                    seen.entry((o.point, 0))
+                        .or_insert_with(Vec::new)
+                        .push((o.camera, o.track_id, j));
+                }
+            }
+            for ((p, e), v) in &seen {
+                let tags: std::collections::BTreeSet<u32> = v.iter().map(|x| x.1).collect();
+                let cams: Vec<u8> = v.iter().map(|x| x.0).collect();
+                if tags.len() > 1 || cams.len() < 2 {
+                    eprintln!("{i}: point {p} epoch {e}: {v:?}");
+                }
+            }
         }
         if std::env::var_os("PT_MATCH_DEBUG").is_some() {
             eprintln!("{i}: {:?}", trav.match_report());

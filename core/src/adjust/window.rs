@@ -173,9 +173,10 @@ pub struct AdjustConfig {
     /// (their poses held fixed), 0 drops a leaving epoch's observations with it.
     /// See [`Window::slide`].
     pub fixed_epochs: usize,
-    /// The carried prior of the window's first epoch is its marginal covariance times
-    /// this factor (>= 1: the covariance also holds the information of observations
-    /// that stay in the window, so it counts them twice at factor 1).
+    /// With `fixed_epochs > 0`, the carried prior of the window's first epoch is its
+    /// marginal covariance times this factor (>= 1: the covariance also holds the
+    /// information of observations that stay in the window, so it counts them twice at
+    /// factor 1). Without fixed epochs the prior is not inflated.
     pub carried_prior_inflation: f64,
 }
 
@@ -353,7 +354,15 @@ struct PointSlot {
     prior_sigma: f64,
     nobs: u32,
     flags: u32,
+    /// Tag of the point's first observation ([`NO_TAG`] before it): a slot freed and
+    /// re-used for another point gets another tag, so a caller holding the index of
+    /// the freed point can tell (see [`Window::point_tag`]).
+    tag: u32,
+    _pad: u32,
 }
+
+/// No observation has tagged the point yet.
+const NO_TAG: u32 = u32::MAX;
 
 const PT_USED: u32 = 1;
 const PT_PRIOR: u32 = 2;
@@ -842,6 +851,7 @@ impl<'a> Window<'a> {
             xyz[2] - self.origin[2],
         ];
         p.flags = PT_USED;
+        p.tag = NO_TAG;
         self.points[slot] = p;
         self.indexed = None;
         Ok(slot as u32)
@@ -864,6 +874,14 @@ impl<'a> Window<'a> {
         s.prior_sigma = sigma_m;
         s.flags |= PT_PRIOR;
         Ok(())
+    }
+
+    /// Tag of a live point's first observation, `None` when the point is not in use
+    /// or not observed yet.
+    pub fn point_tag(&self, point: u32) -> Option<u32> {
+        let p = self.point_slot(point).ok()?;
+        let t = self.points[p].tag;
+        (t != NO_TAG).then_some(t)
     }
 
     fn point_slot(&self, point: u32) -> Result<usize, AdjustError> {
@@ -895,6 +913,9 @@ impl<'a> Window<'a> {
         self.n_obs += 1;
         self.indexed = None;
         self.points[p].nobs += 1;
+        if self.points[p].tag == NO_TAG {
+            self.points[p].tag = o.tag;
+        }
         Ok(self.n_obs - 1)
     }
 
@@ -1109,7 +1130,9 @@ impl<'a> Window<'a> {
         let next = &mut self.epochs[1];
         let mut info = [0.0; 36];
         let have = next.flags & EP_COV != 0 && invert6(&next.cov, &mut info);
-        if have {
+        // Without fixed epochs the prior is the window's only link to the epochs that
+        // left: it stays at full strength.
+        if have && self.cfg.fixed_epochs > 0 {
             let k = 1.0 / self.cfg.carried_prior_inflation;
             info.iter_mut().for_each(|v| *v *= k);
         }

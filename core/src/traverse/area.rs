@@ -94,9 +94,15 @@ impl Traverse<'_> {
             if self.n_area >= room {
                 break;
             }
-            let (Some(key), Some(info)) = (patches.key(i), patches.info(i)) else {
+            let (Some(key), Some(mut info)) = (patches.key(i), patches.info(i)) else {
                 continue;
             };
+            // A point freed since (its slot may hold another track's point) is
+            // intersected anew from the template's stereo pair.
+            if info.point != NO_ID && self.window.point_tag(info.point) != Some(info.tag) {
+                info.point = NO_ID;
+                info.tag = NO_ID;
+            }
             if self.matcher.tie_points().any(|t| t.prev.left == key) {
                 continue;
             }

@@ -535,7 +535,7 @@ impl<'a> Traverse<'a> {
             if tie.cur.left != r.left || !carry(patches, entry, (r.left, r.right)) {
                 continue;
             }
-            let info = tie_info(self.track_points, &tie);
+            let info = tie_info(self.track_points, window, &tie);
             patches.keep(entry, tie.cur.left, info);
         }
         for a in self.area[..self.n_area]
@@ -550,7 +550,7 @@ impl<'a> Traverse<'a> {
             if patches.index_of(tie.cur.left).is_some() {
                 continue;
             }
-            let info = tie_info(self.track_points, &tie);
+            let info = tie_info(self.track_points, window, &tie);
             let depth = stereo_depth(cfg, window, tie.cur.left, tie.cur.right);
             patches.push(left, tie.cur.left, info, depth);
         }
@@ -661,7 +661,7 @@ impl<'a> Traverse<'a> {
             if n >= self.corr.len() {
                 break;
             }
-            let Some(point) = known_point(self.track_points, &tie) else {
+            let Some(point) = known_point(self.track_points, &self.window, &tie) else {
                 continue;
             };
             let Some(xyz) = self.window.point(point) else {
@@ -724,8 +724,19 @@ impl<'a> Traverse<'a> {
         };
         let prev = [prev_left, self.right_of(&prev_left)];
         let mut new_points = 0;
-        for tie in self.matcher.tie_points() {
-            let point = match known_point(self.track_points, &tie) {
+        for (k, tie) in self.matcher.tie_points().enumerate() {
+            // Two tracks whose templates led to one spot observe one image point: the
+            // later one is left out (two window points on one observation would both
+            // take it, and their right observations would contradict each other).
+            let twin = self
+                .matcher
+                .tie_points()
+                .take(k)
+                .any(|t| same_spot(t.cur.left, tie.cur.left));
+            if twin {
+                continue;
+            }
+            let point = match known_point(self.track_points, &self.window, &tie) {
                 Some(p) => p,
                 None => {
                     let at = (prev_id, &prev);
@@ -804,8 +815,8 @@ impl<'a> Traverse<'a> {
 }
 
 /// What a tie point's template shows: its window point when its track has one.
-fn tie_info(map: &[TrackPoint], tie: &TiePoint) -> PatchInfo {
-    match known_point(map, tie) {
+fn tie_info(map: &[TrackPoint], window: &Window, tie: &TiePoint) -> PatchInfo {
+    match known_point(map, window, tie) {
         Some(point) => PatchInfo {
             right: tie.cur.right,
             tag: tie.track_id,
@@ -813,6 +824,13 @@ fn tie_info(map: &[TrackPoint], tie: &TiePoint) -> PatchInfo {
         },
         None => PatchInfo::stereo(tie.cur.right),
     }
+}
+
+/// Two image positions closer than this (pixels, each axis) are one spot.
+const SAME_SPOT_PX: f32 = 0.5;
+
+fn same_spot(a: [f32; 2], b: [f32; 2]) -> bool {
+    (a[0] - b[0]).abs() < SAME_SPOT_PX && (a[1] - b[1]).abs() < SAME_SPOT_PX
 }
 
 /// Depth (metres, along the left camera's axis) of a stereo observation, from the
@@ -861,10 +879,13 @@ fn template_at_scale(
     magnify_template(&anchor, patches.half(), scale, out)
 }
 
-/// The window point of a tie point's track, if the track already has one.
-fn known_point(map: &[TrackPoint], tie: &TiePoint) -> Option<u32> {
+/// The window point of a tie point's track, if the track already has one and the
+/// window still holds it (a freed point's slot may hold another track's point).
+fn known_point(map: &[TrackPoint], window: &Window, tie: &TiePoint) -> Option<u32> {
     let e = map.get(tie.slot as usize)?;
-    (e.track_id == tie.track_id && e.point != u32::MAX).then_some(e.point)
+    (e.track_id == tie.track_id && e.point != u32::MAX)
+        .then_some(e.point)
+        .filter(|&p| window.point_tag(p) == Some(tie.track_id))
 }
 
 /// An image observation of `point` at pixel `px`, weighted by the configured sigma.

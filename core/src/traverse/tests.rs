@@ -257,9 +257,12 @@ fn area_matching_carries_tie_points_to_the_same_scene_point() {
                 checked += 1;
             }
         }
-        // Measured: 32 of 377 positions beyond 0.35 px (18 previous, 14 right),
-        // RMS 0.18 px against the previous observations.
-        assert!(far * 10 <= checked, "{far} of {checked} beyond 0.35 px");
+        // Measured with templates re-taken at every epoch: 32 of 377 positions beyond
+        // 0.35 px (18 previous, 14 right), RMS 0.18 px against the previous
+        // observations. With anchor templates the previous observation is itself a
+        // measurement against the anchor, not the template's centre, so the two
+        // errors add: 72 of 652 beyond 0.35 px.
+        assert!(far * 8 <= checked, "{far} of {checked} beyond 0.35 px");
         let rms = libm::sqrt(sum2 / checked.max(1) as f64);
         assert!(rms < 0.25, "RMS {rms} px");
         (ties, checked)

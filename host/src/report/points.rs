@@ -61,7 +61,9 @@ impl TieCollector {
     }
 
     /// Every point with a final estimate and its measurements (blunders left
-    /// out), ordered by track id; sigma `None` when the adjustment gave none.
+    /// out), ordered by track id; sigma `None` when the adjustment gave none. A point
+    /// left with fewer than two measurements once its blunders are out is no tie
+    /// point (one ray does not position it) and is left out.
     pub fn tie_points(&self) -> Vec<TiePoint> {
         let mut out: BTreeMap<u32, TiePoint> = self
             .points
@@ -91,7 +93,9 @@ impl TieCollector {
                 });
             }
         }
-        out.into_values().collect()
+        out.into_values()
+            .filter(|p| p.measurements.len() >= 2)
+            .collect()
     }
 
     /// Residual lengths, pixels, of every measurement with a final residual
@@ -157,5 +161,22 @@ mod tests {
         let r = c.residuals_px();
         assert_eq!(r.len(), 3);
         assert!(r.iter().all(|v| (v - 0.5).abs() < 1e-6));
+    }
+
+    #[test]
+    fn a_point_left_with_one_unflagged_measurement_is_not_a_tie_point() {
+        let mut c = TieCollector::default();
+        let mut m = Points::new(1, 0);
+        assert!(m.push_observation(obs(7, 2, 0, 0), 4096));
+        assert!(m.push_observation(obs(7, 2, 1, PointObservation::FLAGGED), 4096));
+        let p = PointRecord {
+            track: 7,
+            xyz: [1.0, 2.0, 3.0],
+            std: [0.1; 3],
+        };
+        assert!(m.push_point(p, 4096));
+        c.absorb(&m);
+        assert!(c.tie_points().is_empty());
+        assert_eq!(c.measurement_count(), 2);
     }
 }
