@@ -736,6 +736,11 @@ impl<'a> Traverse<'a> {
             if twin {
                 continue;
             }
+            // A track whose point left the window keeps its identity but gets no new
+            // point: one track, one point, as the reports key points by track.
+            if has_dead_point(self.track_points, &self.window, &tie) {
+                continue;
+            }
             let point = match known_point(self.track_points, &self.window, &tie) {
                 Some(p) => p,
                 None => {
@@ -824,6 +829,15 @@ fn tie_info(map: &[TrackPoint], window: &Window, tie: &TiePoint) -> PatchInfo {
         },
         None => PatchInfo::stereo(tie.cur.right),
     }
+}
+
+/// Whether a tie point's track had a window point that the window has since freed.
+fn has_dead_point(map: &[TrackPoint], window: &Window, tie: &TiePoint) -> bool {
+    map.get(tie.slot as usize).is_some_and(|e| {
+        e.track_id == tie.track_id
+            && e.point != u32::MAX
+            && window.point_tag(e.point) != Some(tie.track_id)
+    })
 }
 
 /// Two image positions closer than this (pixels, each axis) are one spot.
