@@ -18,10 +18,13 @@ Per epoch k (one thread, cv2.setNumThreads(1)):
 If the PnP fails (fewer than 6 matches or inliers), the previous motion is repeated and the epoch
 is flagged "lost".
 
-Only the KITTI layout is read (calib.txt P0/P1, image_0/, image_1/; times.txt is not needed): the
-peer relies on rectified images. rig.toml datasets (lens distortion, converging cameras) would
-need an undistortion/rectification step that is not part of a plain odometry, so they are
-refused with a clear message.
+Both dataset layouts are read. KITTI (calib.txt P0/P1, image_0/, image_1/) is rectified already.
+A rig.toml dataset (lens distortion, converging cameras: the photogrammetric model of
+docs/datasets.md) is first rectified as an OpenCV user would with their calibration: both images
+are remapped (cv2.remap, bilinear) onto a common rectified pinhole pair whose x axis is the base;
+the maps invert the rig's distortion exactly (fixed-point iteration of its correction), so no
+model conversion error enters. The odometry runs on the rectified pair and its poses are rotated
+back into the original left camera frame before they are written.
 
 Timing per epoch excludes image decoding: wall time (time.perf_counter) and this thread's CPU
 time (time.thread_time), per stage and in total. Writes OUT/poses.txt and OUT/peer.json (per-epoch
@@ -90,10 +93,116 @@ def image_files(directory):
     return {epoch_key(f): os.path.join(directory, f) for f in files}, files
 
 
+def read_rig(path):
+    import tomllib
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        raise DatasetError(f"{path}: {e}")
+
+
+def rotation(omega, phi, kappa):
+    """M = Rk Rp Rw (object to camera, photogrammetric axes), angles in radians."""
+    cw, sw, cp, sp, ck, sk = (np.cos(omega), np.sin(omega), np.cos(phi), np.sin(phi),
+                              np.cos(kappa), np.sin(kappa))
+    rw = np.array([[1, 0, 0], [0, cw, sw], [0, -sw, cw]])
+    rp = np.array([[cp, 0, -sp], [0, 1, 0], [sp, 0, cp]])
+    rk = np.array([[ck, sk, 0], [-sk, ck, 0], [0, 0, 1]])
+    return rk @ rp @ rw
+
+
+# KITTI camera axes (x right, y down, z forward) from photogrammetric ones (x right, y up,
+# z backward) and back.
+F = np.diag([1.0, -1.0, -1.0])
+
+
+def distorted_pixels(cam, xc, yc):
+    """Pixels (c, r) whose corrected photo-coordinates are (xc, yc) (mm, relative to the
+    principal point): the correction x - dx(x) is inverted by fixed-point iteration."""
+    k1, k2 = cam.get("radial", [0.0, 0.0])
+    p1, p2 = cam.get("decentering", [0.0, 0.0])
+    x, y = xc.copy(), yc.copy()
+    for _ in range(20):
+        r2 = x * x + y * y
+        dx = x * (k1 * r2 + k2 * r2 * r2) + p1 * (r2 + 2 * x * x) + 2 * p2 * x * y
+        dy = y * (k1 * r2 + k2 * r2 * r2) + 2 * p1 * x * y + p2 * (r2 + 2 * y * y)
+        x, y = xc + dx, yc + dy
+    sx, sy = cam["pixel_size_mm"]
+    x0, y0 = cam["principal_point_mm"]
+    w, h = cam["width_px"], cam["height_px"]
+    c = (x + x0) / sx + (w - 1) / 2.0
+    r = -(y + y0) / sy + (h - 1) / 2.0
+    return c.astype(np.float32), r.astype(np.float32)
+
+
+class Rectifier:
+    """Remaps a rig.toml pair onto a rectified pinhole pair (left camera's focal length in
+    pixels, the images' size, x along the base) and maps its poses back."""
+
+    def __init__(self, rig):
+        left, right = rig["left"], rig["right"]
+        rel = rig.get("right_from_left", {})
+        mrel = rotation(*(np.radians(rel.get(k, 0.0)) for k in ("omega_deg", "phi_deg", "kappa_deg")))
+        base = np.array(rel.get("base_mm", [0.0, 0.0, 0.0])) / 1000.0
+        w, h = left["width_px"], left["height_px"]
+        f = left["focal_mm"] / left["pixel_size_mm"][0]
+        self.K = np.array([[f, 0, (w - 1) / 2.0], [0, f, (h - 1) / 2.0], [0, 0, 1]])
+        # Rectified axes in the left camera's KITTI frame: x along the base.
+        t = F @ base
+        e1 = t / np.linalg.norm(t)
+        e2 = np.array([-t[1], t[0], 0.0])
+        e2 /= np.linalg.norm(e2)
+        self.R = np.vstack([e1, e2, np.cross(e1, e2)])  # left KITTI -> rectified
+        self.baseline = float(np.linalg.norm(base))
+        u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+        rays = np.linalg.inv(self.K) @ np.vstack([u.ravel(), v.ravel(), np.ones(u.size)])
+        in_left = F @ (self.R.T @ rays)  # photogrammetric left camera frame
+        self.maps = []
+        for cam, d in ((left, in_left), (right, mrel @ in_left)):
+            fc = cam["focal_mm"]
+            xc, yc = -fc * d[0] / d[2], -fc * d[1] / d[2]
+            c, r = distorted_pixels(cam, xc, yc)
+            self.maps.append((c.reshape(h, w), r.reshape(h, w)))
+
+    def projections(self):
+        P0 = np.hstack([self.K, np.zeros((3, 1))])
+        P1 = P0.copy()
+        P1[0, 3] = -self.K[0, 0] * self.baseline
+        return P0, P1
+
+    def remap(self, img, camera):
+        mx, my = self.maps[camera]
+        return cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+
+    def to_original(self, pose):
+        """A pose of the rectified left camera in its epoch-0 frame as the original left
+        camera's pose in its own epoch-0 frame (the two frames differ by R only)."""
+        R4 = np.eye(4)
+        R4[:3, :3] = self.R
+        return R4.T @ pose @ R4
+
+
+def open_rig_dataset(root):
+    rect = Rectifier(read_rig(os.path.join(root, "rig.toml")))
+    left, left_names = image_files(os.path.join(root, "left"))
+    right, _ = image_files(os.path.join(root, "right"))
+    pairs = []
+    for name in left_names:
+        key = epoch_key(name)
+        if key not in right:
+            raise DatasetError(f"{root}: no right image for epoch {key}")
+        pairs.append((left[key], right[key]))
+    if not pairs:
+        raise DatasetError(f"{root}/left: no images")
+    P0, P1 = rect.projections()
+    return P0, P1, pairs, rect
+
+
 def open_dataset(root):
+    """(P0, P1, image pairs, rectifier or None) of a KITTI or rig.toml dataset."""
     if os.path.exists(os.path.join(root, "rig.toml")):
-        raise DatasetError(
-            f"{root}: rig.toml layout: this peer reads KITTI-layout (rectified) datasets only")
+        return open_rig_dataset(root)
     calib = os.path.join(root, "calib.txt")
     if not os.path.exists(calib):
         raise DatasetError(f"{root}: no calib.txt (KITTI layout expected)")
@@ -108,7 +217,7 @@ def open_dataset(root):
         pairs.append((left[key], right[key]))
     if not pairs:
         raise DatasetError(f"{root}/image_0: no images")
-    return P0, P1, pairs
+    return P0, P1, pairs, None
 
 
 def load_gray(path):
@@ -280,7 +389,7 @@ def check_rectified(P0, P1):
 def run(dataset, out, max_epochs=None, nfeatures=0, min_octave=None, precise_upscale=False,
         rows=None):
     cv2.setNumThreads(1)
-    P0, P1, pairs = open_dataset(dataset)
+    P0, P1, pairs, rect = open_dataset(dataset)
     K = check_rectified(P0, P1)
     if max_epochs is not None:
         pairs = pairs[:max_epochs]
@@ -294,6 +403,8 @@ def run(dataset, out, max_epochs=None, nfeatures=0, min_octave=None, precise_ups
     with open(os.path.join(out, "poses.txt"), "w") as poses:
         for k, (lp, rp) in enumerate(pairs):
             left, right = load_gray(lp), load_gray(rp)
+            if rect is not None:
+                left, right = rect.remap(left, 0), rect.remap(right, 1)
             watch = Stopwatch()
             counts = {}
             cur = process_stereo(sift, matcher, P0, P1, left, right, watch, counts)
@@ -307,7 +418,8 @@ def run(dataset, out, max_epochs=None, nfeatures=0, min_octave=None, precise_ups
                 pose = pose @ np.linalg.inv(T)
             watch.finish()
             prev = cur
-            poses.write(" ".join(repr(float(v)) for v in pose[:3].ravel()) + "\n")
+            out_pose = pose if rect is None else rect.to_original(pose)
+            poses.write(" ".join(repr(float(v)) for v in out_pose[:3].ravel()) + "\n")
             poses.flush()
             epochs.append({"epoch": k, "status": status, **counts,
                            "stage_ms": {n: round(v, 3) for n, v in watch.wall.items()},

@@ -40,7 +40,15 @@ SCENES = {
     # The same data as curves-real with the rig's relative orientation and the right
     # camera's interior estimated (`run --estimate-rig`), as issue 7's bar asks.
     "curves-real-rig": ["--scene", "curves", "--realistic"],
+    # Seed 000's hand-held rig (0.40 m base, distortion, converging cameras, 2 deg tilt)
+    # walking: +-1 deg on every angle, +-3 cm of bob and sway, 1 m per epoch (rig.toml;
+    # the peer rectifies it first).
+    "handheld": ["--scene", "handheld"],
+    # 1.2 km at 2 m per epoch: four turns of 20 to 60 m radius, a climb and a descent.
+    "drive": ["--scene", "drive"],
 }
+# Scenes whose length is their own (epochs), whatever --frames says.
+FRAMES_OF = {"drive": 600}
 # Scenes that reuse another scene's dataset, and extra `run` options of our side.
 DATASET_OF = {"curves-real-rig": "curves-real"}
 OURS_ARGS = {"curves-real-rig": ["--estimate-rig"]}
@@ -337,7 +345,8 @@ def main():
     before = uptime()
     results = []
     for scene in scenes:
-        r = run_scene(args.bin, args.cache, scene, args.frames, args.cpu_split)
+        frames = FRAMES_OF.get(scene, args.frames)
+        r = run_scene(args.bin, args.cache, scene, frames, args.cpu_split)
         results.append(r)
         o, p = r["ours"], r["peer"]
         print(f"[{scene}] ours {o['translation_pct']:.3f} % {o['rotation_deg_per_m']:.4f} deg/m "

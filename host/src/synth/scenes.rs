@@ -7,7 +7,9 @@ use phototraverse_core::camera::{rotation, Interior, Pose, Rig};
 use std::f64::consts::FRAC_PI_2;
 
 /// Names accepted by `synth --scene`.
-pub const SCENES: &[&str] = &["straight", "curves", "seed2014", "seed2006", "hard"];
+pub const SCENES: &[&str] = &[
+    "straight", "curves", "seed2014", "seed2006", "hard", "handheld", "drive",
+];
 
 /// Dataset layout written by `synth`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -51,7 +53,80 @@ pub struct ScenePlan {
     pub stations: Vec<f64>,
     pub scene: Scene,
     pub hard: Option<HardEffects>,
+    /// A hand-held rig's walking motion, on top of the vibration.
+    pub gait: Option<Gait>,
     seed: u32,
+}
+
+/// The wobble of a rig carried by a walking person: every angle and the position
+/// swing with the stride (two steps per cycle), irregularly from one step to the next.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Gait {
+    /// Amplitude on omega, phi and kappa, degrees.
+    pub angle_deg: f64,
+    /// Amplitude of the vertical bob and the sideways sway, metres.
+    pub bob_m: f64,
+    pub sway_m: f64,
+    /// Length of one step, metres.
+    pub step_m: f64,
+    /// Constant tilt of the rig above the horizon (seed 000's datum omega 92 deg), degrees.
+    pub tilt_deg: f64,
+}
+
+impl Gait {
+    /// Seed 000's hand-held rig: +-1 deg on every angle, +-3 cm of bob and sway.
+    pub const WALKING: Gait = Gait {
+        angle_deg: 1.0,
+        bob_m: 0.03,
+        sway_m: 0.03,
+        step_m: 0.7,
+        tilt_deg: 2.0,
+    };
+}
+
+/// Default epochs of `drive`: 1.2 km at 2 m per epoch.
+const DRIVE_FRAMES: usize = 600;
+
+/// The `drive` street: four turns of 20 to 60 m radius between straights, a climb and
+/// a descent.
+fn drive_layout(s_end: f64) -> (Vec<(f64, f64)>, Vec<(f64, f64)>) {
+    use std::f64::consts::FRAC_PI_2;
+    // (length, signed turn angle): a circular piece of length L and angle a has radius L/|a|.
+    let arc = |radius: f64, angle: f64| (radius * angle.abs(), angle);
+    let pieces = vec![
+        (120.0, 0.0),
+        arc(20.0, -FRAC_PI_2),
+        (150.0, 0.0),
+        arc(60.0, FRAC_PI_2),
+        (200.0, 0.0),
+        arc(35.0, FRAC_PI_2),
+        (160.0, 0.0),
+        arc(25.0, -FRAC_PI_2),
+        ((s_end - 630.0 - 140.0 * FRAC_PI_2).max(200.0), 0.0),
+    ];
+    let grades = vec![
+        (0.0, 0.0),
+        (250.0, 0.04),
+        (400.0, 0.04),
+        (450.0, 0.0),
+        (700.0, 0.0),
+        (760.0, -0.05),
+        (900.0, -0.05),
+        (950.0, 0.0),
+    ];
+    (pieces, grades)
+}
+
+/// The `drive` corridor: narrower than the default street, everything within the
+/// smallest turn radius (20 m) of the centre line, with more gaps between buildings.
+fn drive_style() -> StreetStyle {
+    StreetStyle {
+        ground_half_width: 16.0,
+        facade_offset: 7.0,
+        gap_probability: 0.4,
+        back_wall_offset: 17.0,
+        ..StreetStyle::default()
+    }
 }
 
 fn pinhole_mm(w: u32, h: u32, pixel: [f64; 2], f: f64) -> Interior {
@@ -88,7 +163,7 @@ pub fn plan(name: &str, frames: Option<usize>, seed: u64) -> Result<ScenePlan, S
             120,
             LayoutChoice::Kitti,
         ),
-        "seed2014" => {
+        "seed2014" | "handheld" => {
             let px = [0.0387, 0.0387];
             let left = Interior {
                 width_px: 576,
@@ -112,8 +187,18 @@ pub fn plan(name: &str, frames: Option<usize>, seed: u64) -> Result<ScenePlan, S
                 relative_angles: [0.0, (-0.3f64).to_radians(), 0.0],
                 base_m: [0.40, 0.0, 0.0],
             };
-            ("seed2014", rig, 100, LayoutChoice::Rig)
+            if name == "handheld" {
+                ("handheld", rig, 100, LayoutChoice::Rig)
+            } else {
+                ("seed2014", rig, 100, LayoutChoice::Rig)
+            }
         }
+        "drive" => (
+            "drive",
+            Rig::rectified(cam640, 0.94),
+            DRIVE_FRAMES,
+            LayoutChoice::Kitti,
+        ),
         "seed2006" => {
             let cam = pinhole_mm(720, 480, [0.0067, 0.0075], 5.9);
             (
@@ -136,6 +221,7 @@ pub fn plan(name: &str, frames: Option<usize>, seed: u64) -> Result<ScenePlan, S
         match name {
             "curves" => 1.0 + 0.5 * (2.0 * std::f64::consts::PI * k as f64 / 40.0).sin(),
             "seed2006" => 0.915,
+            "drive" => 2.0,
             _ => 1.0,
         }
     };
@@ -146,7 +232,9 @@ pub fn plan(name: &str, frames: Option<usize>, seed: u64) -> Result<ScenePlan, S
         s += speed(k);
     }
     let s_end = s + 160.0;
-    let (pieces, grades) = if name == "curves" {
+    let (pieces, grades) = if name == "drive" {
+        drive_layout(s_end)
+    } else if name == "curves" {
         let arc = 30.0 * FRAC_PI_2;
         let pieces = vec![
             (30.0, 0.0),
@@ -169,6 +257,9 @@ pub fn plan(name: &str, frames: Option<usize>, seed: u64) -> Result<ScenePlan, S
     };
     let path = StreetPath::from_pieces(-40.0, &pieces, grades);
     let mut style = StreetStyle::default();
+    if name == "drive" {
+        style = drive_style();
+    }
     let mut hard = None;
     if name == "hard" {
         style.textureless = Some((60.0, 85.0));
@@ -182,7 +273,7 @@ pub fn plan(name: &str, frames: Option<usize>, seed: u64) -> Result<ScenePlan, S
     let scene = build_street(path, &style, seed);
     let (camera_height, lane) = match name {
         "seed2006" => (2.2, 1.75 - 0.47),
-        "seed2014" => (1.6, 1.75 - 0.2),
+        "seed2014" | "handheld" => (1.6, 1.75 - 0.2),
         _ => (1.65, 1.75 - 0.47),
     };
     Ok(ScenePlan {
@@ -196,6 +287,7 @@ pub fn plan(name: &str, frames: Option<usize>, seed: u64) -> Result<ScenePlan, S
         lane,
         vibration_deg: if name == "hard" { 0.3 } else { 0.15 },
         bounce_m: 0.01,
+        gait: (name == "handheld").then_some(Gait::WALKING),
         stations,
         scene,
         hard,
@@ -227,9 +319,25 @@ impl ScenePlan {
         // Vibration: smooth in distance (a few metres), deterministic for the seed.
         let a = self.vibration_deg.to_radians();
         let vib = |j: u32| value2(s / 2.5, j as f64 * 3.7, self.seed.wrapping_add(j));
-        let r = rotation(a * vib(1), a * vib(2), 0.5 * a * vib(3));
-        let z = p[2] + self.camera_height + self.bounce_m * vib(4);
-        Pose::from_rotation(&(r * m), [p[0], p[1], z])
+        let mut r = rotation(a * vib(1), a * vib(2), 0.5 * a * vib(3));
+        let mut z = p[2] + self.camera_height + self.bounce_m * vib(4);
+        let mut centre = [p[0], p[1], z];
+        if let Some(g) = &self.gait {
+            // Stride phase with an irregular step; each angle swings with the stride
+            // and wanders from step to step.
+            let step = s / g.step_m;
+            let phase = std::f64::consts::PI * (step + 0.15 * value2(step, 9.1, self.seed));
+            let wander =
+                |j: u32| value2(step * 0.7, j as f64 * 5.3, self.seed.wrapping_add(20 + j));
+            let ga = g.angle_deg.to_radians();
+            let swing = |j: u32, q: f64| ga * (0.7 * (phase + q).sin() + 0.3 * wander(j));
+            let tilt = g.tilt_deg.to_radians();
+            r = rotation(tilt + swing(1, 0.0), swing(2, 1.3), swing(3, 2.1)) * r;
+            z += g.bob_m * (2.0 * phase).cos();
+            let sway = g.sway_m * phase.sin();
+            centre = [p[0] + right[0] * sway, p[1] + right[1] * sway, z];
+        }
+        Pose::from_rotation(&(r * m), centre)
     }
 
     /// Moving objects at (fractional) epoch `k`.
@@ -273,14 +381,79 @@ mod tests {
             assert_eq!(p.frames, 5);
             assert!(p.rig.validate().is_ok());
             let pose = p.left_pose(0.0);
-            // Level-ish camera looking along +Y at about camera height.
+            // Level-ish camera looking along +Y at about camera height (the hand-held
+            // rig tilted by 2 deg and swinging by up to 1 deg).
+            let tol = if p.gait.is_some() { 3.5 } else { 1.0 };
             assert!(
-                (pose.omega.to_degrees() - 90.0).abs() < 1.0,
+                (pose.omega.to_degrees() - 90.0).abs() < tol,
                 "{name}: {pose:?}"
             );
             assert!((pose.centre[2] - p.camera_height).abs() < 0.05);
         }
         assert!(plan("nope", None, 1).is_err());
+    }
+
+    #[test]
+    fn the_drive_is_a_kilometre_with_four_tight_turns() {
+        let p = plan("drive", None, 1).unwrap();
+        let path = p.scene.path.as_ref().unwrap();
+        let length = p.stations.last().unwrap() - p.stations[0];
+        assert!(length >= 1000.0, "{length} m");
+        let steps: Vec<f64> = p.stations.windows(2).map(|w| w[1] - w[0]).collect();
+        assert!(steps.iter().all(|s| (s - 2.0).abs() < 1e-9));
+        // Radii from the heading change over 1 m along the driven stretch.
+        let mut radii = Vec::new();
+        let mut s = 0.0;
+        while s < length {
+            let dh = path.station(s + 1.0).heading - path.station(s).heading;
+            if dh.abs() > 1e-6 {
+                radii.push(1.0 / dh.abs());
+            }
+            s += 1.0;
+        }
+        // Every turn is 20..60 m (steps across a turn's ends see part of it only).
+        let lo = radii.iter().cloned().fold(f64::MAX, f64::min);
+        let near = |r: f64| radii.iter().filter(|&&x| (x - r).abs() < 0.1).count();
+        assert!((19.9..=20.1).contains(&lo), "{lo}");
+        assert!(
+            near(20.0) >= 25 && near(60.0) >= 80,
+            "{} {}",
+            near(20.0),
+            near(60.0)
+        );
+        assert!(near(25.0) >= 30 && near(35.0) >= 45);
+        // It climbs and descends.
+        let z: Vec<f64> = p
+            .stations
+            .iter()
+            .map(|&s| path.station(s).offset(0.0)[2])
+            .collect();
+        let (zmin, zmax) = z
+            .iter()
+            .fold((f64::MAX, f64::MIN), |a, &v| (a.0.min(v), a.1.max(v)));
+        assert!(zmax - zmin > 3.0, "{zmin} .. {zmax}");
+    }
+
+    #[test]
+    fn the_hand_held_rig_wobbles_within_its_gait() {
+        let p = plan("handheld", Some(100), 1).unwrap();
+        let g = p.gait.unwrap();
+        let level = plan("seed2014", Some(100), 1).unwrap();
+        let (mut max_dw, mut max_dz) = (0.0f64, 0.0f64);
+        for k in 0..100 {
+            let (a, b) = (p.left_pose(k as f64), level.left_pose(k as f64));
+            max_dw = max_dw.max((a.omega - b.omega).to_degrees().abs());
+            max_dz = max_dz.max((a.centre[2] - b.centre[2]).abs());
+        }
+        // The tilt plus a swing of up to the amplitude, and a bob of up to 3 cm.
+        assert!(
+            max_dw > g.tilt_deg && max_dw < g.tilt_deg + 1.5 * g.angle_deg,
+            "{max_dw}"
+        );
+        assert!(
+            max_dz > 0.5 * g.bob_m && max_dz < 1.01 * g.bob_m,
+            "{max_dz}"
+        );
     }
 
     #[test]
