@@ -8,7 +8,7 @@ use std::f64::consts::FRAC_PI_2;
 
 /// Names accepted by `synth --scene`.
 pub const SCENES: &[&str] = &[
-    "straight", "curves", "seed2014", "seed2006", "hard", "handheld", "drive",
+    "straight", "curves", "seed2014", "seed2006", "hard", "handheld", "drive", "traffic",
 ];
 
 /// Dataset layout written by `synth`.
@@ -55,6 +55,9 @@ pub struct ScenePlan {
     pub hard: Option<HardEffects>,
     /// A hand-held rig's walking motion, on top of the vibration.
     pub gait: Option<Gait>,
+    /// Moving vehicles: start arclength, lateral offset from the centre line (positive
+    /// right), metres per epoch.
+    pub traffic: Vec<(f64, f64, f64)>,
     seed: u32,
 }
 
@@ -83,6 +86,18 @@ impl Gait {
         tilt_deg: 2.0,
     };
 }
+
+/// The `traffic` scene's vehicles (start arclength, lateral offset, metres per epoch;
+/// the rig drives 1 m per epoch in the right lane, 1.28 m right of the centre line): a
+/// car ahead in our lane that we close in on from 9 m to 4 m, covering up to 40 % of
+/// the image at the end; oncoming cars in the other lane; one overtaking us on the left.
+const TRAFFIC: [(f64, f64, f64); 5] = [
+    (9.0, 1.75, 0.95),
+    (60.0, -1.75, -1.2),
+    (150.0, -1.75, -1.5),
+    (-12.0, -1.75, 1.35),
+    (40.0, -1.0, -0.8),
+];
 
 /// Default epochs of `drive`: 1.2 km at 2 m per epoch.
 const DRIVE_FRAMES: usize = 600;
@@ -193,6 +208,12 @@ pub fn plan(name: &str, frames: Option<usize>, seed: u64) -> Result<ScenePlan, S
                 ("seed2014", rig, 100, LayoutChoice::Rig)
             }
         }
+        "traffic" => (
+            "traffic",
+            Rig::rectified(cam640, 0.94),
+            100,
+            LayoutChoice::Kitti,
+        ),
         "drive" => (
             "drive",
             Rig::rectified(cam640, 0.94),
@@ -288,6 +309,11 @@ pub fn plan(name: &str, frames: Option<usize>, seed: u64) -> Result<ScenePlan, S
         vibration_deg: if name == "hard" { 0.3 } else { 0.15 },
         bounce_m: 0.01,
         gait: (name == "handheld").then_some(Gait::WALKING),
+        traffic: if name == "traffic" {
+            TRAFFIC.to_vec()
+        } else {
+            Vec::new()
+        },
         stations,
         scene,
         hard,
@@ -355,6 +381,22 @@ impl ScenePlan {
                 u32::MAX - 8,
                 &mut out,
             );
+        }
+        if let Some(path) = self.scene.path.as_ref() {
+            for (i, &(s0, d, v)) in self.traffic.iter().enumerate() {
+                let shade = 0.2 + 0.15 * i as f32;
+                let group = u32::MAX - 16 - 2 * i as u32;
+                car(
+                    path,
+                    s0 + v * k,
+                    d,
+                    shade,
+                    4243 + i as u32,
+                    false,
+                    group,
+                    &mut out,
+                );
+            }
         }
         out
     }
@@ -432,6 +474,17 @@ mod tests {
             .iter()
             .fold((f64::MAX, f64::MIN), |a, &v| (a.0.min(v), a.1.max(v)));
         assert!(zmax - zmin > 3.0, "{zmin} .. {zmax}");
+    }
+
+    #[test]
+    fn traffic_moves_through_the_scene() {
+        let p = plan("traffic", None, 1).unwrap();
+        assert_eq!(p.moving(0.0).len(), p.moving(50.0).len());
+        assert!(p.moving(0.0).len() >= 2 * TRAFFIC.len());
+        assert_ne!(p.moving(0.0), p.moving(1.0), "the cars move");
+        // The car ahead in our lane: 9 m ahead at the start, 4 m at the end.
+        let ahead = |k: f64| TRAFFIC[0].0 + TRAFFIC[0].2 * k - p.station_at(k);
+        assert!((ahead(0.0) - 9.0).abs() < 1e-9 && (ahead(100.0) - 4.0).abs() < 1e-6);
     }
 
     #[test]
