@@ -46,6 +46,9 @@ SCENES = {
     "handheld": ["--scene", "handheld"],
     # 1.2 km at 2 m per epoch: four turns of 20 to 60 m radius, a climb and a descent.
     "drive": ["--scene", "drive"],
+    # Moving cars: one ahead in our lane closing from 9 to 4 m (up to ~40 % of the image),
+    # oncoming and overtaking ones.
+    "traffic": ["--scene", "traffic"],
 }
 # Scenes whose length is their own (epochs), whatever --frames says.
 FRAMES_OF = {"drive": 600}
