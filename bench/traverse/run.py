@@ -28,6 +28,9 @@ import steps
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))
+# Real photographs for the facades of the photo-* scenes (the development data beside the
+# repository: Leuven facades, an aerial pair, a cluttered scene).
+PHOTOS = os.path.join(os.path.dirname(REPO), "shared", "data", "pairs")
 
 # name -> synth arguments (scene and options); frames are appended.
 SCENES = {
@@ -49,6 +52,10 @@ SCENES = {
     # Moving cars: one ahead in our lane closing from 9 to 4 m (up to ~40 % of the image),
     # oncoming and overtaking ones.
     "traffic": ["--scene", "traffic"],
+    # Facades textured with real photographs (2 cm per texel), where a SIFT odometry is at
+    # its best.
+    "photo-straight": ["--scene", "straight", "--photo-textures", PHOTOS],
+    "photo-curves": ["--scene", "curves", "--photo-textures", PHOTOS],
 }
 # Scenes whose length is their own (epochs), whatever --frames says.
 FRAMES_OF = {"drive": 600}

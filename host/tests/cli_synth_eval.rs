@@ -236,3 +236,47 @@ fn demo_orients_the_synthetic_street_through_the_firmware() {
         .collect();
     assert!((last[11] - 4.0).abs() < 0.2, "last pose {last:?}");
 }
+
+/// `--photo-textures DIR` puts real photographs on the facades: the images change, the
+/// geometry (ground truth) does not; a directory without images is refused by name.
+#[test]
+fn photo_textures_change_the_facades_not_the_truth() {
+    let t = tempfile::tempdir().unwrap();
+    let photos = t.path().join("photos");
+    std::fs::create_dir(&photos).unwrap();
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/fixtures");
+    std::fs::copy(
+        fixture.join("motorcycle_crop_left.png"),
+        photos.join("motorcycle.png"),
+    )
+    .unwrap();
+    let run = |name: &str, extra: &[&str]| {
+        let d = t.path().join(name);
+        let mut args = vec!["synth", "--scene", "straight", "--frames", "2"];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", d.to_str().unwrap()]);
+        ok(&args);
+        d
+    };
+    let plain = run("plain", &[]);
+    let photo = run("photo", &["--photo-textures", photos.to_str().unwrap()]);
+    let image = |d: &Path| std::fs::read(d.join("image_0/000001.png")).unwrap();
+    assert_ne!(image(&plain), image(&photo), "the facades changed");
+    let gt = |d: &Path| std::fs::read_to_string(d.join("gt_poses.txt")).unwrap();
+    assert_eq!(gt(&plain), gt(&photo));
+    let empty = t.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let out = phototraverse(&[
+        "synth",
+        "--scene",
+        "straight",
+        "--frames",
+        "1",
+        "--photo-textures",
+        empty.to_str().unwrap(),
+        "--out",
+        t.path().join("x").to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no image files"));
+}

@@ -50,6 +50,10 @@ pub struct Args {
     /// view sampled by fewer (or more) pixels.
     #[arg(long, value_parser = parse_size)]
     pub size: Option<(u32, u32)>,
+    /// Texture the facades with the photographs (PNG, JPEG, ...) of this directory,
+    /// 2 cm per texel, instead of the procedural facades.
+    #[arg(long, value_name = "DIR")]
+    pub photo_textures: Option<PathBuf>,
     /// Typical sensor: `--realistic` = blur 0.6, vignetting 0.25, flicker 0.05, noise 1.5, JPEG 90, calib base=0.003,focal=0.003,pp_px=1,rel_deg=0.05.
     #[arg(long)]
     pub realistic: bool,
@@ -74,6 +78,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     };
     opts.jpeg_quality = a.jpeg;
     opts.size = a.size;
+    opts.photo_textures = a.photo_textures.clone();
     opts.calib_error =
         CalibError::parse(&a.calib_error).map_err(|e| anyhow::anyhow!("--calib-error: {e}"))?;
     if a.realistic {

@@ -72,6 +72,8 @@ pub struct Surface<'a> {
     pub textureless: Option<(f64, f64)>,
     /// The primitive lies in the textureless range.
     pub flat: bool,
+    /// Photographs for the facades, when the scene has them.
+    pub photos: Option<&'a super::photo::Photos>,
 }
 
 /// Radiance of a hit.
@@ -110,6 +112,13 @@ fn albedo(m: &Material, s: &Surface) -> f64 {
             u0,
         } => {
             let (u, v) = (s.hit.uv[0] + u0 as f64, s.hit.uv[1]);
+            if let Some(photos) = s.photos {
+                // Each facade its own photograph and place in it; the shade keeps
+                // neighbouring buildings apart.
+                let shift = (seed % 997) as f64 * 0.37;
+                let grey = photos.sample(seed, u + shift, v, fp);
+                return (0.1 + 0.9 * grey) * (0.6 + 0.6 * shade as f64);
+            }
             facade(
                 seed,
                 shade as f64,

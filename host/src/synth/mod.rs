@@ -10,6 +10,7 @@ pub mod geometry;
 pub mod material;
 pub mod noise;
 pub mod path;
+pub mod photo;
 pub mod realism;
 pub mod render;
 pub mod scene;
@@ -46,6 +47,8 @@ pub struct SynthOptions {
     /// Image size `(width, height)` instead of the scene's: the same sensor and field of
     /// view sampled by other pixels (see [`resample`]).
     pub size: Option<(u32, u32)>,
+    /// Texture the facades with the photographs of this directory ([`photo`]).
+    pub photo_textures: Option<PathBuf>,
 }
 
 impl SynthOptions {
@@ -63,6 +66,7 @@ impl SynthOptions {
             edge_ss: RenderSettings::default().edge_ss,
             progress: false,
             size: None,
+            photo_textures: None,
         }
     }
 }
@@ -133,6 +137,9 @@ pub fn generate(opts: &SynthOptions) -> anyhow::Result<SynthSummary> {
     if let Some((w, h)) = opts.size {
         plan.rig.left = resample(&plan.rig.left, w, h)?;
         plan.rig.right = resample(&plan.rig.right, w, h)?;
+    }
+    if let Some(dir) = &opts.photo_textures {
+        plan.scene.photos = Some(std::sync::Arc::new(photo::Photos::load(dir)?));
     }
     let layout = opts.layout.unwrap_or(plan.layout);
     let truth = plan.rig;

@@ -344,6 +344,7 @@ impl<'a> Frame<'a> {
             path: self.scene.path.as_ref(),
             textureless: self.scene.textureless,
             flat: p.flat,
+            photos: self.scene.photos.as_deref(),
         };
         let depth = hit.t * self.cam.focal_mm / norm;
         (shade(&p.material, &surface, &self.scene.light), i, depth)

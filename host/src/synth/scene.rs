@@ -26,6 +26,8 @@ pub struct Scene {
     pub light: Light,
     pub path: Option<StreetPath>,
     pub textureless: Option<(f64, f64)>,
+    /// Photographs that texture the facades instead of the procedural ones.
+    pub photos: Option<std::sync::Arc<super::photo::Photos>>,
 }
 
 impl Scene {
@@ -37,6 +39,7 @@ impl Scene {
             light: Light::default(),
             path: None,
             textureless: None,
+            photos: None,
         }
     }
 }
@@ -168,6 +171,7 @@ pub fn build_street(path: StreetPath, style: &StreetStyle, seed: u64) -> Scene {
         light: Light::default(),
         path: Some(path),
         textureless: style.textureless,
+        photos: None,
     }
 }
 
