@@ -183,10 +183,10 @@ class Rectifier:
         return R4.T @ pose @ R4
 
 
-def open_rig_dataset(root):
-    rect = Rectifier(read_rig(os.path.join(root, "rig.toml")))
-    left, left_names = image_files(os.path.join(root, "left"))
-    right, _ = image_files(os.path.join(root, "right"))
+def image_pairs(root, left_dir, right_dir):
+    """(left, right) image paths per epoch, paired by the epoch key of their names."""
+    left, left_names = image_files(os.path.join(root, left_dir))
+    right, _ = image_files(os.path.join(root, right_dir))
     pairs = []
     for name in left_names:
         key = epoch_key(name)
@@ -194,9 +194,14 @@ def open_rig_dataset(root):
             raise DatasetError(f"{root}: no right image for epoch {key}")
         pairs.append((left[key], right[key]))
     if not pairs:
-        raise DatasetError(f"{root}/left: no images")
+        raise DatasetError(f"{root}/{left_dir}: no images")
+    return pairs
+
+
+def open_rig_dataset(root):
+    rect = Rectifier(read_rig(os.path.join(root, "rig.toml")))
     P0, P1 = rect.projections()
-    return P0, P1, pairs, rect
+    return P0, P1, image_pairs(root, "left", "right"), rect
 
 
 def open_dataset(root):
@@ -207,17 +212,7 @@ def open_dataset(root):
     if not os.path.exists(calib):
         raise DatasetError(f"{root}: no calib.txt (KITTI layout expected)")
     P0, P1 = read_calib(calib)
-    left, left_names = image_files(os.path.join(root, "image_0"))
-    right, _ = image_files(os.path.join(root, "image_1"))
-    pairs = []
-    for name in left_names:
-        key = epoch_key(name)
-        if key not in right:
-            raise DatasetError(f"{root}: no right image for epoch {key}")
-        pairs.append((left[key], right[key]))
-    if not pairs:
-        raise DatasetError(f"{root}/image_0: no images")
-    return P0, P1, pairs, None
+    return P0, P1, image_pairs(root, "image_0", "image_1"), None
 
 
 def load_gray(path):

@@ -79,15 +79,7 @@ fn mean_step_rotation_error(truth: &[Pose], est: &[Pose]) -> [f64; 3] {
 
 #[test]
 fn exact_observations_leave_no_systematic_step_error() {
-    let cam = Interior {
-        width_px: 640,
-        height_px: 480,
-        pixel_size_mm: [0.01, 0.01],
-        focal_mm: 5.0,
-        principal_point_mm: [0.0; 2],
-        radial: [0.0; 2],
-        decentering: [0.0; 2],
-    };
+    let cam = Interior::pinhole_px(640, 480, 500.0);
     let rig = Rig::rectified(cam, 0.94);
     let truth = true_poses();
     let mut cfg = TraverseConfig::for_rig(rig, truth[0]);
@@ -104,8 +96,8 @@ fn exact_observations_leave_no_systematic_step_error() {
     let mut rng = Rng(5);
     let points = street_points(&mut rng, 1500);
     let rp = RigParams::from_rig(&rig);
-    let half = [3.2, 2.4];
-    let wt = 1.0 / libm::pow(cfg.sigma_px * 0.01, 2.0);
+    let half = [320.0, 240.0];
+    let wt = 1.0 / libm::pow(cfg.sigma_px, 2.0);
     let mut ids: Vec<Option<u32>> = vec![None; points.len()];
     let mut est = Vec::new();
     for (k, pose) in truth.iter().enumerate() {

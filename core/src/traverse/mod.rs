@@ -672,6 +672,12 @@ impl<'a> Traverse<'a> {
             self.corr[n] = Correspondence { point: xyz, xy };
             n += 1;
         }
+        self.resect_on(n)
+    }
+
+    /// Robust resection of the current left camera on the first `n` correspondences;
+    /// a pose only with at least `min_tie_points` inliers.
+    fn resect_on(&self, n: usize) -> Option<Pose> {
         let mut rcfg = self.cfg.resection;
         rcfg.threshold_mm = 3.0 * self.cfg.sigma_px * self.cfg.rig.left.pixel_size_mm[0];
         let r = resect(&self.corr[..n], self.cfg.rig.left.focal_mm, &rcfg).ok()?;
@@ -704,10 +710,7 @@ impl<'a> Traverse<'a> {
             self.corr[n] = Correspondence { point: xyz, xy };
             n += 1;
         }
-        let mut rcfg = self.cfg.resection;
-        rcfg.threshold_mm = 3.0 * self.cfg.sigma_px * self.cfg.rig.left.pixel_size_mm[0];
-        let r = resect(&self.corr[..n], self.cfg.rig.left.focal_mm, &rcfg).ok()?;
-        (r.inliers >= self.cfg.min_tie_points).then_some(r.pose)
+        self.resect_on(n)
     }
 
     /// Adds the epoch's tie points: observations of known points, new points by

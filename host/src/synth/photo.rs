@@ -70,8 +70,9 @@ pub struct Photos {
 impl Photos {
     /// Every image file of `dir` (sorted by name), in grey.
     pub fn load(dir: &Path) -> Result<Photos> {
-        let entries = std::fs::read_dir(dir)
-            .with_context(|| format!("cannot read the photo texture directory {}", dir.display()))?;
+        let entries = std::fs::read_dir(dir).with_context(|| {
+            format!("cannot read the photo texture directory {}", dir.display())
+        })?;
         let mut files: Vec<_> = entries
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| {
@@ -114,7 +115,10 @@ impl Photos {
         // Upright: the photograph's bottom row stands on the ground (v = 0).
         let (x, y) = (u / TEXEL_M, levels[0].h as f64 - 0.5 - v / TEXEL_M);
         // Mip level: texels per pixel footprint, log2.
-        let lod = (footprint / TEXEL_M).max(1.0).log2().min((levels.len() - 1) as f64);
+        let lod = (footprint / TEXEL_M)
+            .max(1.0)
+            .log2()
+            .min((levels.len() - 1) as f64);
         let l0 = lod.floor() as usize;
         let l1 = (l0 + 1).min(levels.len() - 1);
         let t = lod - l0 as f64;
