@@ -102,9 +102,12 @@ const TRAFFIC: [(f64, f64, f64); 5] = [
 /// Default epochs of `drive`: 1.2 km at 2 m per epoch.
 const DRIVE_FRAMES: usize = 600;
 
+/// A street's pieces `(length, turn angle)` and grade knots `(arclength, grade)`.
+type Layout = (Vec<(f64, f64)>, Vec<(f64, f64)>);
+
 /// The `drive` street: four turns of 20 to 60 m radius between straights, a climb and
 /// a descent.
-fn drive_layout(s_end: f64) -> (Vec<(f64, f64)>, Vec<(f64, f64)>) {
+fn drive_layout(s_end: f64) -> Layout {
     use std::f64::consts::FRAC_PI_2;
     // (length, signed turn angle): a circular piece of length L and angle a has radius L/|a|.
     let arc = |radius: f64, angle: f64| (radius * angle.abs(), angle);
