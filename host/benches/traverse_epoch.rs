@@ -86,6 +86,11 @@ const SETTERS: &[(&str, Setter)] = &[
         })
     }),
     ("temporal_refine", |c, v| c.temporal_refine = v != 0.0),
+    ("rows_only", |c, v| {
+        if let Some(r) = c.matching.refine.as_mut() {
+            r.rows_only = v != 0.0;
+        }
+    }),
     ("min_ncc", |c, v| {
         if let Some(r) = c.matching.refine.as_mut() {
             r.min_ncc = v as f32;
