@@ -461,6 +461,11 @@ impl TraverseConfig {
         let a = &mut self.adjust;
         match mode {
             TraverseMode::Window => return self,
+            // The seeds' procedures drop a leaving epoch's observations with it.
+            TraverseMode::Seed2014 | TraverseMode::Seed2006 => a.fixed_epochs = 0,
+        }
+        match mode {
+            TraverseMode::Window => {}
             TraverseMode::Seed2014 => {
                 a.window = 2;
                 a.robust = Robust::SeedReweight {
@@ -505,6 +510,7 @@ mod mode_tests {
         let c = b.with_mode(TraverseMode::Seed2014);
         assert_eq!(c.adjust.window, 2);
         assert_eq!(c.matching.track_history, 2);
+        assert_eq!((b.adjust.fixed_epochs, c.adjust.fixed_epochs), (8, 0));
         assert_eq!(
             c.adjust.robust,
             Robust::SeedReweight {
@@ -528,6 +534,7 @@ mod mode_tests {
         let c = b.with_mode(TraverseMode::Seed2006);
         assert_eq!(c.adjust.window, 7);
         assert_eq!(c.matching.track_history, 7);
+        assert_eq!(c.adjust.fixed_epochs, 0);
         assert_eq!(c.adjust.robust, Robust::None);
         assert_eq!(c.adjust.max_iterations, 20);
         // Table 14: base variance 0.001 m^2, velocity variance 0.5 m^2/s^2.
