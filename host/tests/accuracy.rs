@@ -4,8 +4,9 @@
 //! template was re-taken at every epoch wandered over the surface, and the window
 //! could add nothing over frame-to-frame odometry): on this sequence that floor was
 //! `FLOOR_DRIFT_PCT` and `FLOOR_DEG_PER_M`.
+mod common;
+use common::ok;
 use std::path::Path;
-use std::process::Command;
 
 /// Epochs of the sequence: long enough for segments of tens of metres.
 const FRAMES: &str = "60";
@@ -20,19 +21,6 @@ const MAX_DEG_PER_M: f64 = 0.0016;
 const _: () =
     assert!(MAX_DRIFT_PCT < 0.85 * FLOOR_DRIFT_PCT && MAX_DEG_PER_M < 0.85 * FLOOR_DEG_PER_M);
 
-fn phototraverse(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_phototraverse"))
-        .args(args)
-        .output()
-        .expect("binary runs");
-    assert!(
-        out.status.success(),
-        "phototraverse {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
 fn number(v: &serde_json::Value, key: &str) -> f64 {
     v[key]
         .as_f64()
@@ -45,7 +33,7 @@ fn straight_street_beats_the_old_floor_through_the_firmware() {
     let ds = t.path().join("ds");
     let out = t.path().join("out");
     let s = |p: &Path| p.to_str().unwrap().to_owned();
-    phototraverse(&[
+    ok(&[
         "synth",
         "--scene",
         "straight",
@@ -54,9 +42,9 @@ fn straight_street_beats_the_old_floor_through_the_firmware() {
         "--out",
         &s(&ds),
     ]);
-    phototraverse(&["run", &s(&ds), "--out", &s(&out), "--link", "inproc"]);
+    ok(&["run", &s(&ds), "--out", &s(&out), "--link", "inproc"]);
     let json = t.path().join("eval.json");
-    phototraverse(&[
+    ok(&[
         "eval",
         &s(&ds.join("gt_poses.txt")),
         &s(&out.join("poses.txt")),

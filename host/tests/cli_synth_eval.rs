@@ -3,25 +3,9 @@
 use phototraverse_host::dataset::Dataset;
 use phototraverse_host::poses::{read_poses, write_poses};
 use std::path::Path;
-use std::process::Command;
 
-fn phototraverse(args: &[&str]) -> std::process::Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_phototraverse"))
-        .args(args)
-        .output()
-        .expect("binary runs");
-    out
-}
-
-fn ok(args: &[&str]) -> String {
-    let out = phototraverse(args);
-    assert!(
-        out.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
+mod common;
+use common::{ok, phototraverse};
 
 fn files(dir: &Path) -> Vec<(String, Vec<u8>)> {
     let mut out = Vec::new();

@@ -1,20 +1,8 @@
 //! End to end through the CLI: `run --mode seed2014 --estimate-rig` on a small
 //! synthetic seed-2014 street completes, says its mode, and reports the rig and the
 //! chi-square counts in report.json.
-use std::process::Command;
-
-fn ok(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_phototraverse"))
-        .args(args)
-        .output()
-        .expect("binary runs");
-    assert!(
-        out.status.success(),
-        "{args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
+mod common;
+use common::{ok, phototraverse};
 
 #[test]
 fn run_seed2014_mode_with_the_rig_estimated() {
@@ -78,10 +66,7 @@ fn run_seed2014_mode_with_the_rig_estimated() {
 
 #[test]
 fn unknown_mode_is_refused_with_the_choices() {
-    let out = Command::new(env!("CARGO_BIN_EXE_phototraverse"))
-        .args(["run", "nowhere", "--mode", "seed1999"])
-        .output()
-        .unwrap();
+    let out = phototraverse(&["run", "nowhere", "--mode", "seed1999"]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
