@@ -173,6 +173,34 @@ fn every_scene_writes_and_kitti_refuses_distortion() {
         ]);
         assert_eq!(Dataset::open(&d).unwrap().len(), 1, "{scene}");
     }
+    // The new scenes, small: at 320x240 (`--size`), in their own layouts (handheld:
+    // rig.toml with the seed lens resampled; traffic: moving vehicles in synth.json).
+    for (scene, layout_file) in [
+        ("handheld", "rig.toml"),
+        ("drive", "calib.txt"),
+        ("traffic", "calib.txt"),
+    ] {
+        let d = t.path().join(scene);
+        ok(&[
+            "synth",
+            "--scene",
+            scene,
+            "--frames",
+            "2",
+            "--size",
+            "320x240",
+            "--out",
+            d.to_str().unwrap(),
+        ]);
+        let ds = Dataset::open(&d).unwrap();
+        assert_eq!(ds.len(), 2, "{scene}");
+        assert_eq!((ds.rig.left.width_px, ds.rig.left.height_px), (320, 240));
+        assert!(d.join(layout_file).exists(), "{scene}");
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(d.join("synth.json")).unwrap()).unwrap();
+        let moving = summary["moving_fraction_max"].as_f64().unwrap();
+        assert_eq!(moving > 0.0, scene == "traffic", "{scene}: {moving}");
+    }
     let out = phototraverse(&[
         "synth",
         "--scene",

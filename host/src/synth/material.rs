@@ -27,6 +27,10 @@ pub enum Material {
     Glass { seed: u32 },
     /// A pole.
     Pole { seed: u32 },
+    /// Open ground (grass and soil) from the world coordinates.
+    Field { seed: u32 },
+    /// A plain roadway (cross streets) from the world coordinates.
+    Asphalt { seed: u32 },
     /// Uniform albedo, lit.
     Flat { shade: f32 },
     /// Uniform radiance, unlit (test targets).
@@ -94,6 +98,8 @@ fn flat_albedo(m: &Material) -> f64 {
         }
         Material::Glass { .. } => 0.15,
         Material::Pole { .. } => 0.45,
+        Material::Field { .. } => 0.3,
+        Material::Asphalt { .. } => 0.3,
         Material::Emissive { value } => *value as f64,
     }
 }
@@ -144,9 +150,38 @@ fn albedo(m: &Material, s: &Surface) -> f64 {
             let (u, v) = (s.hit.uv[0], s.hit.uv[1]);
             0.45 + 0.12 * fbm(u * 4.0, v, seed, 0.5, 3, 0.6, fp)
         }
+        Material::Field { seed } => field(seed, s),
+        Material::Asphalt { seed } => asphalt(seed, s),
         Material::Flat { shade } => shade as f64,
         Material::Emissive { value } => value as f64,
     }
+}
+
+/// Open ground: fields of their own shade tens of metres across, grass and soil
+/// from metres down to tufts of a few centimetres.
+fn field(seed: u32, s: &Surface) -> f64 {
+    let (x, y) = (s.point[0], s.point[1]);
+    let fp = s.footprint;
+    let fields = fbm(x, y, seed, 60.0, 3, 0.5, fp);
+    let soil = fbm(x, y, seed ^ 0x3c, 6.0, 4, 0.6, fp);
+    let grass = fbm(x, y, seed ^ 0x5d, 0.8, 6, 0.7, fp);
+    let tufts = band_weight(0.03, fp) * value2(x * 33.0, y * 33.0, seed ^ 0x7e);
+    (0.27 * (1.0 + 0.3 * fields) * (1.0 + 0.25 * soil) * (1.0 + 0.3 * grass + 0.12 * tufts))
+        .clamp(0.03, 1.0)
+}
+
+/// A roadway without markings: grain, stones and repair patches.
+fn asphalt(seed: u32, s: &Surface) -> f64 {
+    let (x, y) = (s.point[0], s.point[1]);
+    let fp = s.footprint;
+    let stones = band_weight(0.02, fp) * value2(x * 50.0, y * 50.0, seed ^ 0x11);
+    let grain = fbm(x, y, seed, 1.5, 5, 0.75, fp) + 0.5 * stones;
+    let patch = if value2(x / 7.0, y / 7.0, seed ^ 0x22) > 0.45 {
+        0.8
+    } else {
+        1.0
+    };
+    0.30 * patch * (1.0 + 0.35 * grain)
 }
 
 /// Road, markings and sidewalks from the street coordinates.

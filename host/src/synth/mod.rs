@@ -89,6 +89,10 @@ pub struct SynthSummary {
     pub render_cpu_ms_mean: Option<f64>,
     /// Share of pixels supersampled as silhouettes.
     pub edge_fraction: f64,
+    /// Share of an image's pixels that see moving objects (vehicles of `traffic` and
+    /// `hard`): largest over the images, and mean.
+    pub moving_fraction_max: f64,
+    pub moving_fraction_mean: f64,
     pub threads: usize,
 }
 
@@ -215,6 +219,7 @@ pub fn generate(opts: &SynthOptions) -> anyhow::Result<SynthSummary> {
         indicatif::ProgressBar::hidden()
     };
     let (mut ms_sum, mut ms_max, mut edges, mut images) = (0.0f64, 0.0f64, 0usize, 0usize);
+    let (mut moving_sum, mut moving_max) = (0.0f64, 0.0f64);
     let mut cpu_sum: Option<f64> = None;
     let imp = opts.imperfections;
     for (k, left_pose) in poses.iter().enumerate() {
@@ -229,12 +234,12 @@ pub fn generate(opts: &SynthOptions) -> anyhow::Result<SynthSummary> {
             let t0 = Instant::now();
             let cpu0 = process_cpu_ms();
             let (w, h) = (cam.width_px as usize, cam.height_px as usize);
-            let (mut radiance, depth, edge_pixels) = match &plan.hard {
+            let (mut radiance, depth, edge_pixels, moving_pixels) = match &plan.hard {
                 Some(hard) if hard.subframes > 1 => {
                     // Motion blur: average sub-frames over the exposure; depth from the middle one.
                     let mut acc = vec![0.0f32; w * h];
                     let mut depth = Vec::new();
-                    let mut e = 0;
+                    let (mut e, mut moving) = (0, 0);
                     let n = hard.subframes;
                     for j in 0..n {
                         let dk = hard.shutter * (j as f64 / (n - 1) as f64 - 0.5);
@@ -257,15 +262,19 @@ pub fn generate(opts: &SynthOptions) -> anyhow::Result<SynthSummary> {
                         if mid {
                             depth = img.depth;
                             e = img.edge_pixels;
+                            moving = img.moving_pixels;
                         }
                     }
-                    (acc, depth, e)
+                    (acc, depth, e, moving)
                 }
                 _ => {
                     let img = render(&plan.scene, &plan.moving(k as f64), cam, &pose, &settings);
-                    (img.radiance, img.depth, img.edge_pixels)
+                    (img.radiance, img.depth, img.edge_pixels, img.moving_pixels)
                 }
             };
+            let moving = moving_pixels as f64 / (w * h) as f64;
+            moving_sum += moving;
+            moving_max = moving_max.max(moving);
             let ms = t0.elapsed().as_secs_f64() * 1e3;
             if let (Some(a), Some(b)) = (cpu0, process_cpu_ms()) {
                 cpu_sum = Some(cpu_sum.unwrap_or(0.0) + (b - a));
@@ -327,6 +336,8 @@ pub fn generate(opts: &SynthOptions) -> anyhow::Result<SynthSummary> {
         render_ms_max: ms_max,
         render_cpu_ms_mean: cpu_sum.map(|c| c / images.max(1) as f64),
         edge_fraction: edges as f64 / (images.max(1) as f64 * w as f64 * h as f64),
+        moving_fraction_max: moving_max,
+        moving_fraction_mean: moving_sum / images.max(1) as f64,
         threads: rayon::current_num_threads(),
     };
     std::fs::write(

@@ -53,6 +53,8 @@ pub struct Rendered {
     pub depth: Vec<f32>,
     /// Pixels that were supersampled.
     pub edge_pixels: usize,
+    /// Pixels whose centre sees one of the `extra` primitives (moving objects).
+    pub moving_pixels: usize,
 }
 
 struct Frame<'a> {
@@ -69,6 +71,8 @@ struct Frame<'a> {
     bins: Vec<Vec<u32>>,
     /// Nearest depth of each primitive in `prims`.
     near: Vec<f64>,
+    /// Index in `prims` of the first of the `extra` primitives.
+    first_extra: u32,
 }
 
 /// Renders `scene` plus `extra` primitives (moving objects) from `pose` with camera `cam`.
@@ -86,23 +90,27 @@ pub fn render(
     let mut depth = vec![f32::INFINITY; w * h];
 
     // Pass 1: one ray per pixel centre.
-    radiance
+    let moving_pixels = radiance
         .par_chunks_mut(w)
         .zip(ids.par_chunks_mut(w))
         .zip(depth.par_chunks_mut(w))
         .enumerate()
-        .for_each(|(r, ((rad, id), dep))| {
+        .map(|(r, ((rad, id), dep))| {
+            let mut moving = 0;
             for c in 0..w {
                 let (v, pid, z) = frame.sample(c as f64, r as f64, 1.0);
                 rad[c] = v as f32;
                 id[c] = if pid == SKY_ID {
                     SKY_ID
                 } else {
+                    moving += usize::from(pid >= frame.first_extra);
                     frame.prims[pid as usize].group
                 };
                 dep[c] = z as f32;
             }
-        });
+            moving
+        })
+        .sum();
     if !settings.depth {
         depth = Vec::new();
     }
@@ -146,6 +154,7 @@ pub fn render(
         radiance,
         depth,
         edge_pixels,
+        moving_pixels,
     }
 }
 
@@ -218,7 +227,11 @@ impl<'a> Frame<'a> {
         let mut bins: Vec<Vec<u32>> = vec![Vec::new(); tiles_x * tiles_y];
         let mut hull = Vec::with_capacity(8);
         let mut proj: Vec<[f64; 2]> = Vec::with_capacity(16);
-        for p in scene.prims.iter().chain(extra.iter()) {
+        let mut first_extra = None;
+        for (n, p) in scene.prims.iter().chain(extra.iter()).enumerate() {
+            if n == scene.prims.len() {
+                first_extra = Some(prims.len() as u32);
+            }
             let edges = p.shape.hull(&mut hull);
             // Camera frame: depth is -w.
             let cam_pts: Vec<V3> = hull.iter().map(|q| m * (q - origin)).collect();
@@ -302,6 +315,7 @@ impl<'a> Frame<'a> {
             tiles_x,
             bins,
             near,
+            first_extra: first_extra.unwrap_or(u32::MAX),
         }
     }
 

@@ -1,7 +1,9 @@
 //! The named scenes: rig, street, trajectory and special effects of each.
 use super::noise::value2;
 use super::path::StreetPath;
-use super::scene::{build_street, car, Primitive, Scene, StreetStyle};
+use super::scene::{
+    build_street, car, vehicle, Primitive, Scene, StreetStyle, VehicleKind, Zone, ZoneKind,
+};
 use nalgebra::{Matrix3, Vector3};
 use phototraverse_core::camera::{rotation, Interior, Pose, Rig};
 use std::f64::consts::FRAC_PI_2;
@@ -55,9 +57,8 @@ pub struct ScenePlan {
     pub hard: Option<HardEffects>,
     /// A hand-held rig's walking motion, on top of the vibration.
     pub gait: Option<Gait>,
-    /// Moving vehicles: start arclength, lateral offset from the centre line (positive
-    /// right), metres per epoch.
-    pub traffic: Vec<(f64, f64, f64)>,
+    /// Moving vehicles.
+    pub traffic: Vec<Mover>,
     seed: u32,
 }
 
@@ -87,62 +88,243 @@ impl Gait {
     };
 }
 
-/// The `traffic` scene's vehicles (start arclength, lateral offset, metres per epoch;
-/// the rig drives 1 m per epoch in the right lane, 1.28 m right of the centre line): a
-/// car ahead in our lane that we close in on from 9 m to 4 m, covering up to 40 % of
-/// the image at the end; oncoming cars in the other lane; one overtaking us on the left.
-const TRAFFIC: [(f64, f64, f64); 5] = [
-    (9.0, 1.75, 0.95),
-    (60.0, -1.75, -1.2),
-    (150.0, -1.75, -1.5),
-    (-12.0, -1.75, 1.35),
-    (40.0, -1.0, -0.8),
+/// How a vehicle of a scene moves: street coordinates (arclength, lateral offset
+/// positive right) at epoch `k`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Motion {
+    /// Along the street in lane `d` at `v` metres per epoch (negative: oncoming).
+    Along { s0: f64, v: f64, d: f64 },
+    /// Through keyframes `(epoch, arclength, lateral offset)`: monotone cubic in
+    /// between (no overshoot), straight on beyond the ends.
+    Keys(&'static [(f64, f64, f64)]),
+    /// Across the street at arclength `s`: lateral offset `d0 + v k`, held within
+    /// `+-reach` (the vehicle waits there).
+    Across { s: f64, d0: f64, v: f64, reach: f64 },
+}
+
+impl Motion {
+    /// `(arclength, lateral offset, heading relative to the street)` at epoch `k`.
+    pub fn at(&self, k: f64) -> (f64, f64, f64) {
+        use std::f64::consts::PI;
+        match *self {
+            Motion::Along { s0, v, d } => (s0 + v * k, d, if v < 0.0 { PI } else { 0.0 }),
+            Motion::Keys(keys) => {
+                let (s, ds) = pchip(keys, k, |q| q.1);
+                let (d, dd) = pchip(keys, k, |q| q.2);
+                (s, d, dd.atan2(ds))
+            }
+            Motion::Across { s, d0, v, reach } => {
+                let d = (d0 + v * k).clamp(-reach, reach);
+                (s, d, v.signum() * 0.5 * PI)
+            }
+        }
+    }
+}
+
+/// Value and derivative at `k` of the monotone piecewise-cubic (Fritsch-Carlson)
+/// through `(key.0, value(key))`; linear beyond the ends.
+fn pchip(keys: &[(f64, f64, f64)], k: f64, value: impl Fn(&(f64, f64, f64)) -> f64) -> (f64, f64) {
+    let n = keys.len();
+    let x = |i: usize| keys[i].0;
+    let y = |i: usize| value(&keys[i]);
+    if n == 1 {
+        return (y(0), 0.0);
+    }
+    let slope = |i: usize| (y(i + 1) - y(i)) / (x(i + 1) - x(i));
+    let tangent = |i: usize| {
+        if i == 0 {
+            slope(0)
+        } else if i == n - 1 {
+            slope(n - 2)
+        } else {
+            let (a, b) = (slope(i - 1), slope(i));
+            if a * b <= 0.0 {
+                0.0
+            } else {
+                2.0 / (1.0 / a + 1.0 / b)
+            }
+        }
+    };
+    if k <= x(0) {
+        return (y(0) + tangent(0) * (k - x(0)), tangent(0));
+    }
+    if k >= x(n - 1) {
+        return (y(n - 1) + tangent(n - 1) * (k - x(n - 1)), tangent(n - 1));
+    }
+    let i = (0..n - 1).rfind(|&i| x(i) <= k).unwrap_or(0);
+    let h = x(i + 1) - x(i);
+    let t = (k - x(i)) / h;
+    let (m0, m1) = (tangent(i) * h, tangent(i + 1) * h);
+    let (t2, t3) = (t * t, t * t * t);
+    let v = (2.0 * t3 - 3.0 * t2 + 1.0) * y(i)
+        + (t3 - 2.0 * t2 + t) * m0
+        + (-2.0 * t3 + 3.0 * t2) * y(i + 1)
+        + (t3 - t2) * m1;
+    let dv = ((6.0 * t2 - 6.0 * t) * y(i)
+        + (3.0 * t2 - 4.0 * t + 1.0) * m0
+        + (-6.0 * t2 + 6.0 * t) * y(i + 1)
+        + (3.0 * t2 - 2.0 * t) * m1)
+        / h;
+    (v, dv)
+}
+
+/// A moving vehicle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Mover {
+    pub kind: VehicleKind,
+    pub shade: f32,
+    pub motion: Motion,
+}
+
+const fn along(kind: VehicleKind, shade: f32, s0: f64, v: f64, d: f64) -> Mover {
+    Mover {
+        kind,
+        shade,
+        motion: Motion::Along { s0, v, d },
+    }
+}
+
+const fn across(kind: VehicleKind, shade: f32, s: f64, d0: f64, v: f64) -> Mover {
+    Mover {
+        kind,
+        shade,
+        motion: Motion::Across {
+            s,
+            d0,
+            v,
+            reach: 52.0,
+        },
+    }
+}
+
+/// The `traffic` scene's vehicles. The rig drives 1 m per epoch (arclength = epoch)
+/// 1.28 m right of the centre line; lanes at -1.75 (oncoming) and +1.75 m; cross
+/// streets at 39..51 m and 129..141 m.
+pub const TRAFFIC: [Mover; 8] = [
+    // A van overtaking us on the left (passing at epoch 8), into our lane at epochs
+    // 18..28, braking: we close in to 4 m (epoch 62), then it pulls away.
+    Mover {
+        kind: VehicleKind::Van,
+        shade: 0.55,
+        motion: Motion::Keys(&[
+            (0.0, -10.0, -1.75),
+            (18.0, 29.6, -1.75),
+            (28.0, 50.0, 1.75),
+            (40.0, 57.5, 1.75),
+            (52.0, 61.6, 1.75),
+            (60.0, 66.8, 1.75),
+            (72.0, 81.0, 1.75),
+            (100.0, 128.0, 1.75),
+        ]),
+    },
+    // Oncoming, passing us at epochs 2 (car), 58 (a bus, while the van is closest), 75
+    // (car) and 86 (van).
+    along(VehicleKind::Car, 0.7, 5.0, -1.0, -1.75),
+    along(VehicleKind::Bus, 0.45, 122.0, -1.0, -1.75),
+    along(VehicleKind::Car, 0.2, 150.0, -1.0, -1.75),
+    along(VehicleKind::Van, 0.75, 190.0, -1.2, -1.75),
+    // Crossing ahead at the first cross street: a van left to right (in the middle at
+    // epoch 5), a car right to left (epoch 16); at the second a bus left to right
+    // (epoch 95).
+    across(VehicleKind::Van, 0.6, 43.5, -5.5, 1.1),
+    across(VehicleKind::Car, 0.25, 46.5, 20.8, -1.3),
+    across(VehicleKind::Bus, 0.35, 136.5, -95.0, 1.0),
 ];
 
+/// Cross streets of `traffic`: at 45 and 135 m (the zebra crossings), 12 m wide,
+/// reaching 60 m to each side.
+fn traffic_style() -> StreetStyle {
+    let crossing = |s: f64| Zone {
+        s0: s - 6.0,
+        s1: s + 6.0,
+        kind: ZoneKind::Crossing { length: 60.0 },
+    };
+    StreetStyle {
+        zones: vec![crossing(45.0), crossing(135.0)],
+        ..StreetStyle::default()
+    }
+}
+
 /// Default epochs of `drive`: 1.2 km at 2 m per epoch.
-const DRIVE_FRAMES: usize = 600;
+pub const DRIVE_FRAMES: usize = 600;
 
 /// A street's pieces `(length, turn angle)` and grade knots `(arclength, grade)`.
 type Layout = (Vec<(f64, f64)>, Vec<(f64, f64)>);
 
-/// The `drive` street: four turns of 20 to 60 m radius between straights, a climb and
-/// a descent.
+/// The `drive` street: four turns of 25, 20, 60 and 40 m radius between straights
+/// (left, right, right, left), a 3 % climb, a 4 % descent, a 2.5 % climb and a 3 %
+/// descent.
 fn drive_layout(s_end: f64) -> Layout {
-    use std::f64::consts::FRAC_PI_2;
     // (length, signed turn angle): a circular piece of length L and angle a has radius L/|a|.
     let arc = |radius: f64, angle: f64| (radius * angle.abs(), angle);
     let pieces = vec![
-        (120.0, 0.0),
-        arc(20.0, -FRAC_PI_2),
-        (150.0, 0.0),
-        arc(60.0, FRAC_PI_2),
-        (200.0, 0.0),
-        arc(35.0, FRAC_PI_2),
-        (160.0, 0.0),
+        (100.0, 0.0),
         arc(25.0, -FRAC_PI_2),
-        ((s_end - 630.0 - 140.0 * FRAC_PI_2).max(200.0), 0.0),
+        (160.0, 0.0),
+        arc(20.0, FRAC_PI_2),
+        (260.0, 0.0),
+        arc(60.0, FRAC_PI_2),
+        (150.0, 0.0),
+        arc(40.0, -FRAC_PI_2),
+        ((s_end - 670.0 - 145.0 * FRAC_PI_2).max(200.0), 0.0),
     ];
     let grades = vec![
         (0.0, 0.0),
-        (250.0, 0.04),
-        (400.0, 0.04),
-        (450.0, 0.0),
+        (40.0, 0.03),
+        (120.0, 0.03),
+        (160.0, 0.0),
+        (360.0, 0.0),
+        (400.0, -0.04),
+        (520.0, -0.04),
+        (560.0, 0.0),
         (700.0, 0.0),
-        (760.0, -0.05),
-        (900.0, -0.05),
-        (950.0, 0.0),
+        (740.0, 0.025),
+        (820.0, 0.025),
+        (860.0, 0.0),
+        (960.0, 0.0),
+        (1000.0, -0.03),
+        (1080.0, -0.03),
+        (1120.0, 0.0),
     ];
     (pieces, grades)
 }
 
-/// The `drive` corridor: narrower than the default street, everything within the
-/// smallest turn radius (20 m) of the centre line, with more gaps between buildings.
+/// The `drive` corridor: a street narrower than the default (facades 7 m from the
+/// centre line, everything within 20 m of it: the smallest turn radius), two narrow
+/// stretches (facades 5.3..6.3 m from the centre line, 4..5 m from the camera on the
+/// right; one through the 20 m turn) and open country (fields, buildings 30..110 m away).
 fn drive_style() -> StreetStyle {
+    let narrow = ZoneKind::Narrow {
+        facade: 5.3,
+        back: 15.0,
+    };
     StreetStyle {
         ground_half_width: 16.0,
         facade_offset: 7.0,
         gap_probability: 0.4,
         back_wall_offset: 17.0,
+        zones: vec![
+            Zone {
+                s0: 145.0,
+                s1: 345.0,
+                kind: narrow,
+            },
+            Zone {
+                s0: 350.0,
+                s1: 585.0,
+                kind: ZoneKind::Open {
+                    verge: 7.0,
+                    field: 150.0,
+                    near: 30.0,
+                    far: 110.0,
+                },
+            },
+            Zone {
+                s0: 950.0,
+                s1: 1100.0,
+                kind: narrow,
+            },
+        ],
         ..StreetStyle::default()
     }
 }
@@ -283,6 +465,8 @@ pub fn plan(name: &str, frames: Option<usize>, seed: u64) -> Result<ScenePlan, S
     let mut style = StreetStyle::default();
     if name == "drive" {
         style = drive_style();
+    } else if name == "traffic" {
+        style = traffic_style();
     }
     let mut hard = None;
     if name == "hard" {
@@ -386,17 +570,17 @@ impl ScenePlan {
             );
         }
         if let Some(path) = self.scene.path.as_ref() {
-            for (i, &(s0, d, v)) in self.traffic.iter().enumerate() {
-                let shade = 0.2 + 0.15 * i as f32;
-                let group = u32::MAX - 16 - 2 * i as u32;
-                car(
-                    path,
-                    s0 + v * k,
-                    d,
-                    shade,
+            for (i, m) in self.traffic.iter().enumerate() {
+                let (s, d, turn) = m.motion.at(k);
+                let st = path.station(s);
+                vehicle(
+                    m.kind,
+                    st.offset(d),
+                    st.heading + turn,
+                    m.shade,
                     4243 + i as u32,
                     false,
-                    group,
+                    u32::MAX - 16 - 4 * i as u32,
                     &mut out,
                 );
             }
@@ -418,6 +602,8 @@ impl ScenePlan {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::synth::geometry::{Shape, V3};
+    use crate::synth::material::Material;
 
     #[test]
     fn every_scene_plans() {
@@ -441,6 +627,7 @@ mod tests {
     #[test]
     fn the_drive_is_a_kilometre_with_four_tight_turns() {
         let p = plan("drive", None, 1).unwrap();
+        assert!(p.frames >= 500);
         let path = p.scene.path.as_ref().unwrap();
         let length = p.stations.last().unwrap() - p.stations[0];
         assert!(length >= 1000.0, "{length} m");
@@ -456,18 +643,20 @@ mod tests {
             }
             s += 1.0;
         }
-        // Every turn is 20..60 m (steps across a turn's ends see part of it only).
+        // Four turns of 20..60 m (steps across a turn's ends see part of it only).
         let lo = radii.iter().cloned().fold(f64::MAX, f64::min);
-        let near = |r: f64| radii.iter().filter(|&&x| (x - r).abs() < 0.1).count();
         assert!((19.9..=20.1).contains(&lo), "{lo}");
+        let near = |r: f64| radii.iter().filter(|&&x| (x - r).abs() < 0.1).count();
         assert!(
-            near(20.0) >= 25 && near(60.0) >= 80,
-            "{} {}",
+            near(20.0) >= 30 && near(25.0) >= 38 && near(40.0) >= 61 && near(60.0) >= 93,
+            "{} {} {} {}",
             near(20.0),
+            near(25.0),
+            near(40.0),
             near(60.0)
         );
-        assert!(near(25.0) >= 30 && near(35.0) >= 45);
-        // It climbs and descends.
+        assert!(radii.iter().filter(|&&r| r > 60.1).count() <= 8);
+        // It climbs and descends, at a few percent.
         let z: Vec<f64> = p
             .stations
             .iter()
@@ -477,17 +666,172 @@ mod tests {
             .iter()
             .fold((f64::MAX, f64::MIN), |a, &v| (a.0.min(v), a.1.max(v)));
         assert!(zmax - zmin > 3.0, "{zmin} .. {zmax}");
+        let grades: Vec<f64> = p.stations.iter().map(|&s| path.station(s).grade).collect();
+        assert!(grades.iter().all(|g| g.abs() <= 0.04 + 1e-12));
+        assert!(grades.iter().any(|&g| g > 0.029) && grades.iter().any(|&g| g < -0.039));
+    }
+
+    /// `(arclength, lateral offset)` of a primitive's first vertex.
+    fn street_coords(path: &StreetPath, prim: &Primitive, near_s: f64) -> Option<(f64, f64)> {
+        let o = match &prim.shape {
+            Shape::Polygon { origin, .. } => [origin[0], origin[1]],
+            Shape::Cylinder { centre, .. } => *centre,
+            Shape::Disc { centre, .. } => [centre[0], centre[1]],
+        };
+        Some(path.local(path.segment_index(near_s), o))
+    }
+
+    #[test]
+    fn the_drive_has_narrow_streets_and_open_country() {
+        let p = plan("drive", None, 1).unwrap();
+        let path = p.scene.path.as_ref().unwrap();
+        // Facades (the walls facing the street) seen from the camera, 1.28 m right of
+        // the centre line: by horizontal rays to the right.
+        let side_hit = |s: f64, dir: f64| {
+            let st = path.station(s);
+            let o = st.offset(p.lane);
+            let origin = V3::new(o[0], o[1], o[2] + 1.65);
+            let r = st.right();
+            let d = V3::new(dir * r[0], dir * r[1], 0.0);
+            p.scene
+                .prims
+                .iter()
+                .filter(|q| matches!(q.material, Material::Facade { .. }))
+                .filter_map(|q| q.shape.intersect(&origin, &d, 1e9).map(|h| h.t))
+                .fold(f64::INFINITY, f64::min)
+        };
+        // Narrow stretches: facades 4..5 m away on the right where there is no gap.
+        for (s0, s1) in [(150.0, 295.0), (955.0, 1095.0)] {
+            let hits: Vec<f64> = (0..30)
+                .map(|i| side_hit(s0 + (s1 - s0) * i as f64 / 29.0, 1.0))
+                .collect();
+            let close = hits.iter().filter(|&&t| (3.9..=5.1).contains(&t)).count();
+            assert!(close >= 18, "{s0}..{s1}: {hits:?}");
+            assert!(hits.iter().all(|&t| t > 3.9), "{hits:?}");
+        }
+        // Elsewhere on the street, facades 5.7..7.3 m away on the right.
+        let hits: Vec<f64> = (0..30)
+            .map(|i| side_hit(700.0 + 4.0 * i as f64, 1.0))
+            .collect();
+        assert!(hits.iter().filter(|&&t| (5.6..=7.3).contains(&t)).count() >= 15);
+        // Open country (350..585 m): no facade within 25 m of the road, buildings
+        // 30..125 m away, fields out to 100 m and more on both sides.
+        let mut far = 0;
+        let mut field = [0.0f64; 2];
+        for q in &p.scene.prims {
+            let Some((s, d)) = street_coords(path, q, 470.0) else {
+                continue;
+            };
+            if !(352.0..583.0).contains(&s) {
+                continue;
+            }
+            match q.material {
+                Material::Facade { .. } => {
+                    assert!(d.abs() > 25.0, "facade at s {s} d {d}");
+                    far += usize::from(d.abs() > 30.0 && d.abs() < 125.0);
+                }
+                Material::Field { .. } => {
+                    if let Shape::Polygon { verts, count, .. } = &q.shape {
+                        let len = (0..*count as usize)
+                            .map(|i| (verts[i][0].powi(2) + verts[i][1].powi(2)).sqrt())
+                            .fold(0.0, f64::max);
+                        field[usize::from(d > 0.0)] = field[usize::from(d > 0.0)].max(len);
+                    }
+                }
+                _ => {}
+            }
+        }
+        assert!(far >= 5 * 8, "{far} faces of distant buildings");
+        assert!(field[0] > 100.0 && field[1] > 100.0, "{field:?}");
     }
 
     #[test]
     fn traffic_moves_through_the_scene() {
         let p = plan("traffic", None, 1).unwrap();
         assert_eq!(p.moving(0.0).len(), p.moving(50.0).len());
-        assert!(p.moving(0.0).len() >= 2 * TRAFFIC.len());
-        assert_ne!(p.moving(0.0), p.moving(1.0), "the cars move");
-        // The car ahead in our lane: 9 m ahead at the start, 4 m at the end.
-        let ahead = |k: f64| TRAFFIC[0].0 + TRAFFIC[0].2 * k - p.station_at(k);
-        assert!((ahead(0.0) - 9.0).abs() < 1e-9 && (ahead(100.0) - 4.0).abs() < 1e-6);
+        assert!(p.moving(0.0).len() >= 5 * TRAFFIC.len());
+        assert_ne!(p.moving(0.0), p.moving(1.0), "the vehicles move");
+        // The van: overtakes on the left, then ahead in our lane, 4 m at its closest.
+        let van = |k: f64| TRAFFIC[0].motion.at(k);
+        assert!(van(0.0).0 < 0.0 && van(0.0).1 < 0.0);
+        let gap = |k: f64| van(k).0 - 2.6 - p.station_at(k);
+        let closest = (30..100).map(|k| gap(k as f64)).fold(f64::MAX, f64::min);
+        assert!((closest - 4.0).abs() < 0.05, "{closest}");
+        assert!((van(40.0).1 - 1.75).abs() < 1e-9);
+        // Oncoming vehicles face us, crossing ones face across.
+        assert!((TRAFFIC[2].motion.at(10.0).2 - std::f64::consts::PI).abs() < 1e-12);
+        assert!((TRAFFIC[5].motion.at(5.0).2.abs() - FRAC_PI_2).abs() < 1e-12);
+    }
+
+    /// Footprint `(s0, s1, d0, d1)` in street coordinates of a vehicle at epoch `k`.
+    fn footprint(m: &Mover, k: f64) -> (f64, f64, f64, f64) {
+        let (s, d, turn) = m.motion.at(k);
+        let [len, width, _] = m.kind.size();
+        let (c, sn) = (turn.cos().abs(), turn.sin().abs());
+        let (hs, hd) = (0.5 * (len * c + width * sn), 0.5 * (len * sn + width * c));
+        (s - hs, s + hs, d - hd, d + hd)
+    }
+
+    #[test]
+    fn traffic_vehicles_never_meet_in_view() {
+        let p = plan("traffic", None, 1).unwrap();
+        for q in 0..=4 * p.frames {
+            let k = q as f64 / 4.0;
+            let cam = p.station_at(k);
+            for (i, a) in TRAFFIC.iter().enumerate() {
+                let fa = footprint(a, k);
+                // Nothing drives into the rig.
+                assert!(
+                    !(fa.0 < cam + 0.5
+                        && fa.1 > cam - 2.0
+                        && fa.2 < p.lane + 1.0
+                        && fa.3 > p.lane - 1.0),
+                    "vehicle {i} hits the rig at epoch {k}"
+                );
+                for (j, b) in TRAFFIC.iter().enumerate().skip(i + 1) {
+                    let fb = footprint(b, k);
+                    let (s0, s1) = (fa.0.max(fb.0), fa.1.min(fb.1));
+                    let (d0, d1) = (fa.2.max(fb.2), fa.3.min(fb.3));
+                    // Overlaps out of view (behind the rig) do not matter.
+                    assert!(
+                        s0 >= s1 || d0 >= d1 || s1 < cam + 1.0,
+                        "vehicles {i} and {j} meet at epoch {k}: {fa:?} {fb:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn traffic_covers_a_sizeable_fraction_at_some_epoch() {
+        use crate::synth::render::{render, RenderSettings};
+        let p = plan("traffic", None, 1).unwrap();
+        // The vehicles alone (no street to hide them), seen by the left camera at 80x60.
+        let cam = crate::synth::resample(&p.rig.left, 80, 60).unwrap();
+        let settings = RenderSettings {
+            edge_ss: 1,
+            depth: false,
+            ..Default::default()
+        };
+        let empty = Scene::empty(0.9);
+        let coverage: Vec<f64> = (0..p.frames)
+            .map(|k| {
+                let img = render(
+                    &empty,
+                    &p.moving(k as f64),
+                    &cam,
+                    &p.left_pose(k as f64),
+                    &settings,
+                );
+                img.moving_pixels as f64 / (80.0 * 60.0)
+            })
+            .collect();
+        let max = coverage.iter().cloned().fold(0.0, f64::max);
+        let at = coverage.iter().position(|&c| c == max).unwrap();
+        assert!((0.35..=0.6).contains(&max), "{max} at epoch {at}");
+        assert!((45..70).contains(&at), "{at}");
+        // Vehicles in view almost all the time.
+        assert!(coverage.iter().filter(|&&c| c > 0.01).count() > 90);
     }
 
     #[test]
