@@ -7,7 +7,7 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// Scene: straight, curves, seed2014, seed2006 or hard.
+    /// Scene: straight, curves, seed2014, seed2006, hard, handheld, drive or traffic.
     #[arg(long)]
     pub scene: String,
     /// Output directory (created).
@@ -50,10 +50,10 @@ pub struct Args {
     /// view sampled by fewer (or more) pixels.
     #[arg(long, value_parser = parse_size)]
     pub size: Option<(u32, u32)>,
-    /// Texture the facades with the photographs (PNG, JPEG, ...) of this directory,
-    /// 2 cm per texel, instead of the procedural facades.
-    #[arg(long, value_name = "DIR")]
-    pub photo_textures: Option<PathBuf>,
+    /// Texture the facades with photographs (PNG, JPEG, ...): image files and the image
+    /// files of directories, comma-separated; 1 to 3 cm per texel.
+    #[arg(long, value_name = "PATH[,PATH...]", value_delimiter = ',')]
+    pub photo_textures: Vec<PathBuf>,
     /// Typical sensor: `--realistic` = blur 0.6, vignetting 0.25, flicker 0.05, noise 1.5, JPEG 90, calib base=0.003,focal=0.003,pp_px=1,rel_deg=0.05.
     #[arg(long)]
     pub realistic: bool,

@@ -3,6 +3,7 @@
 use super::geometry::{Hit, V3};
 use super::noise::{band_weight, fast_floor, fbm, periodic, stripe, unit, value2};
 use super::path::StreetPath;
+use super::photo::{Footprint, Placement};
 
 /// What a primitive looks like.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -78,6 +79,8 @@ pub struct Surface<'a> {
     pub flat: bool,
     /// Photographs for the facades, when the scene has them.
     pub photos: Option<&'a super::photo::Photos>,
+    /// Unit direction of the ray that hit.
+    pub ray: V3,
 }
 
 /// Radiance of a hit.
@@ -119,10 +122,9 @@ fn albedo(m: &Material, s: &Surface) -> f64 {
         } => {
             let (u, v) = (s.hit.uv[0] + u0 as f64, s.hit.uv[1]);
             if let Some(photos) = s.photos {
-                // Each facade its own photograph and place in it; the shade keeps
+                // Each facade its own photograph, scale and place in it; the shade keeps
                 // neighbouring buildings apart.
-                let shift = (seed % 997) as f64 * 0.37;
-                let grey = photos.sample(seed, u + shift, v, fp);
+                let grey = photos.sample(&Placement::of(seed), u, v, &facade_footprint(s));
                 return (0.1 + 0.9 * grey) * (0.6 + 0.6 * shade as f64);
             }
             facade(
@@ -182,6 +184,27 @@ fn asphalt(seed: u32, s: &Surface) -> f64 {
         1.0
     };
     0.30 * patch * (1.0 + 0.35 * grain)
+}
+
+/// The pixel footprint on a facade (u horizontal, v up): `Surface::footprint` is
+/// its geometric mean `minor / sqrt(cos)`; the long axis is the ray's direction
+/// within the facade's plane.
+fn facade_footprint(s: &Surface) -> Footprint {
+    let n = s.hit.normal;
+    let cos = s.hit.cos.clamp(0.02, 1.0);
+    let in_plane = s.ray - n * n.dot(&s.ray);
+    let horizontal = V3::z().cross(&n);
+    let (a, b) = (in_plane.dot(&horizontal), in_plane[2]);
+    let len = (a * a + b * b).sqrt();
+    Footprint {
+        minor: s.footprint * cos.sqrt(),
+        cos,
+        axis: if len > 1e-9 {
+            [a / len, b / len]
+        } else {
+            [1.0, 0.0]
+        },
+    }
 }
 
 /// Road, markings and sidewalks from the street coordinates.

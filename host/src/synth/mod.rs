@@ -47,8 +47,9 @@ pub struct SynthOptions {
     /// Image size `(width, height)` instead of the scene's: the same sensor and field of
     /// view sampled by other pixels (see [`resample`]).
     pub size: Option<(u32, u32)>,
-    /// Texture the facades with the photographs of this directory ([`photo`]).
-    pub photo_textures: Option<PathBuf>,
+    /// Texture the facades with these photographs (files, or directories of them;
+    /// [`photo`]); none: the procedural facades.
+    pub photo_textures: Vec<PathBuf>,
 }
 
 impl SynthOptions {
@@ -66,7 +67,7 @@ impl SynthOptions {
             edge_ss: RenderSettings::default().edge_ss,
             progress: false,
             size: None,
-            photo_textures: None,
+            photo_textures: Vec::new(),
         }
     }
 }
@@ -142,8 +143,10 @@ pub fn generate(opts: &SynthOptions) -> anyhow::Result<SynthSummary> {
         plan.rig.left = resample(&plan.rig.left, w, h)?;
         plan.rig.right = resample(&plan.rig.right, w, h)?;
     }
-    if let Some(dir) = &opts.photo_textures {
-        plan.scene.photos = Some(std::sync::Arc::new(photo::Photos::load(dir)?));
+    if !opts.photo_textures.is_empty() {
+        plan.scene.photos = Some(std::sync::Arc::new(photo::Photos::load(
+            &opts.photo_textures,
+        )?));
     }
     let layout = opts.layout.unwrap_or(plan.layout);
     let truth = plan.rig;

@@ -1,16 +1,20 @@
-//! Real photographs as facade textures (`synth --photo-textures DIR`): the rendered
-//! streets then carry the texture statistics of real scenes, where a SIFT odometry does
-//! best, instead of the procedural facades.
+//! Real photographs as facade textures (`synth --photo-textures PATH[,PATH...]`): the
+//! rendered streets then carry the texture statistics of real scenes, where a SIFT
+//! odometry does best, instead of the procedural facades.
 //!
-//! Each photograph becomes a grey mip pyramid (2x2 box averages); a facade samples one
-//! of them, chosen by its seed, at [`TEXEL_M`] per texel, mirrored at the edges so the
-//! tiling has no seams, with trilinear filtering over the pixel's footprint (no
+//! Each photograph becomes a grey mip pyramid (2x2 box averages). A facade wears one of
+//! them, chosen by its seed, at 1 to 3 cm per texel (also from the seed), upright,
+//! mirrored at its edges so the tiling has no seams, and some facades mirror it
+//! left-right. It is filtered over the pixel's footprint: trilinear over the footprint's
+//! short axis, several taps along its long axis where the facade is seen obliquely (no
 //! aliasing as the surface recedes).
 use anyhow::{bail, Context, Result};
-use std::path::Path;
 
-/// Size of one photograph texel on a facade, metres (the middle of 1-3 cm).
-pub const TEXEL_M: f64 = 0.02;
+/// Size of one photograph texel on a facade, metres: from `TEXEL_M.0` to `TEXEL_M.1`.
+pub const TEXEL_M: (f64, f64) = (0.01, 0.03);
+
+/// Most taps along the long axis of an oblique footprint (beyond, a coarser level).
+const MAX_TAPS: usize = 8;
 
 /// Image files taken from the directory.
 const EXTENSIONS: &[&str] = &["png", "jpg", "jpeg", "pgm", "ppm", "bmp", "tif", "tiff"];
@@ -61,29 +65,88 @@ impl Level {
     }
 }
 
-/// The photographs of a directory as mip pyramids.
+/// Photographs as mip pyramids.
 #[derive(Debug, Clone)]
 pub struct Photos {
     pyramids: Vec<Vec<Level>>,
 }
 
+/// How one facade wears a photograph.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Placement {
+    /// Which photograph (modulo the count).
+    pub index: u32,
+    /// Texel size on the facade, metres.
+    pub texel_m: f64,
+    /// Horizontal shift, metres.
+    pub shift_m: f64,
+    /// Mirrored left-right.
+    pub mirrored: bool,
+}
+
+impl Placement {
+    /// The placement of the facade with this seed.
+    pub fn of(seed: u32) -> Placement {
+        let h = super::noise::hash3(seed as i32, 17, 0x9e37);
+        let t = (h >> 8) as f64 / 16_777_216.0;
+        Placement {
+            index: seed,
+            texel_m: TEXEL_M.0 + (TEXEL_M.1 - TEXEL_M.0) * t,
+            shift_m: (seed % 997) as f64 * 0.37,
+            mirrored: h & 1 == 1,
+        }
+    }
+}
+
+/// The pixel footprint on a surface: `minor` metres across, stretched to `minor / cos`
+/// along the unit direction `axis` (surface coordinates) by the obliquity.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Footprint {
+    pub minor: f64,
+    pub cos: f64,
+    pub axis: [f64; 2],
+}
+
+impl Footprint {
+    /// A round footprint `size` metres across.
+    pub fn round(size: f64) -> Footprint {
+        Footprint {
+            minor: size,
+            cos: 1.0,
+            axis: [1.0, 0.0],
+        }
+    }
+}
+
 impl Photos {
-    /// Every image file of `dir` (sorted by name), in grey.
-    pub fn load(dir: &Path) -> Result<Photos> {
-        let entries = std::fs::read_dir(dir).with_context(|| {
-            format!("cannot read the photo texture directory {}", dir.display())
-        })?;
-        let mut files: Vec<_> = entries
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| {
-                p.extension()
-                    .and_then(|e| e.to_str())
-                    .is_some_and(|e| EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
-            })
-            .collect();
-        files.sort();
+    /// The photographs named by `paths`: image files, and every image file of the
+    /// directories among them (sorted by name); in grey.
+    pub fn load(paths: &[std::path::PathBuf]) -> Result<Photos> {
+        let mut files = Vec::new();
+        for path in paths {
+            if path.is_dir() {
+                let entries = std::fs::read_dir(path).with_context(|| {
+                    format!("cannot read the photo texture directory {}", path.display())
+                })?;
+                let mut found: Vec<_> = entries
+                    .filter_map(|e| e.ok().map(|e| e.path()))
+                    .filter(|p| {
+                        p.extension()
+                            .and_then(|e| e.to_str())
+                            .is_some_and(|e| EXTENSIONS.contains(&e.to_ascii_lowercase().as_str()))
+                    })
+                    .collect();
+                found.sort();
+                if found.is_empty() {
+                    bail!("{}: no image files for photo textures", path.display());
+                }
+                files.extend(found);
+            } else {
+                files.push(path.clone());
+            }
+        }
         if files.is_empty() {
-            bail!("{}: no image files for photo textures", dir.display());
+            bail!("no photographs for photo textures");
         }
         let mut pyramids = Vec::new();
         for f in &files {
@@ -108,26 +171,49 @@ impl Photos {
         self.pyramids.is_empty()
     }
 
-    /// Grey value (0..1) of photograph `index` (modulo the count) at facade coordinates
-    /// `(u, v)` metres (v up), for a pixel footprint of `footprint` metres.
-    pub fn sample(&self, index: u32, u: f64, v: f64, footprint: f64) -> f64 {
-        let levels = &self.pyramids[index as usize % self.pyramids.len()];
-        // Upright: the photograph's bottom row stands on the ground (v = 0).
-        let (x, y) = (u / TEXEL_M, levels[0].h as f64 - 0.5 - v / TEXEL_M);
-        // Mip level: texels per pixel footprint, log2.
-        let lod = (footprint / TEXEL_M)
+    /// Grey value (0..1) of the photograph of `place` at facade coordinates `(u, v)`
+    /// metres (v up) over the pixel footprint `fp`.
+    pub fn sample(&self, place: &Placement, u: f64, v: f64, fp: &Footprint) -> f64 {
+        let levels = &self.pyramids[place.index as usize % self.pyramids.len()];
+        let texel = place.texel_m;
+        let u = if place.mirrored { -u } else { u } + place.shift_m;
+        // Long axis in texels (rows go down, v up; mirroring flips u).
+        let cos = fp.cos.clamp(0.02, 1.0);
+        let major = fp.minor / cos;
+        let taps = ((1.0 / cos).ceil() as usize).clamp(1, MAX_TAPS);
+        // Each tap covers major / taps along the long axis and the minor axis across.
+        let width = fp.minor.max(major / taps as f64);
+        let lod = (width / texel)
             .max(1.0)
             .log2()
             .min((levels.len() - 1) as f64);
         let l0 = lod.floor() as usize;
         let l1 = (l0 + 1).min(levels.len() - 1);
         let t = lod - l0 as f64;
-        let at = |l: usize| {
-            let s = (1u64 << l) as f64;
-            // Texel centres of level l sit at 2^l (i + 1/2) - 1/2 in level-0 texels.
-            levels[l].bilinear((x + 0.5) / s - 0.5, (y + 0.5) / s - 0.5)
-        };
-        at(l0) * (1.0 - t) + at(l1) * t
+        let (au, av) = (
+            if place.mirrored {
+                -fp.axis[0]
+            } else {
+                fp.axis[0]
+            },
+            fp.axis[1],
+        );
+        let mut sum = 0.0;
+        for i in 0..taps {
+            let o = major * ((i as f64 + 0.5) / taps as f64 - 0.5);
+            // Upright: the photograph's bottom row stands at v = 0.
+            let (x, y) = (
+                (u + o * au) / texel,
+                levels[0].h as f64 - 0.5 - (v + o * av) / texel,
+            );
+            let at = |l: usize| {
+                let s = (1u64 << l) as f64;
+                // Texel centres of level l sit at 2^l (i + 1/2) - 1/2 in level-0 texels.
+                levels[l].bilinear((x + 0.5) / s - 0.5, (y + 0.5) / s - 0.5)
+            };
+            sum += at(l0) * (1.0 - t) + at(l1) * t;
+        }
+        sum / taps as f64
     }
 }
 
@@ -151,16 +237,34 @@ mod tests {
         }
     }
 
+    const AT_2CM: Placement = Placement {
+        index: 0,
+        texel_m: 0.02,
+        shift_m: 0.0,
+        mirrored: false,
+    };
+    const T: f64 = 0.02;
+
     #[test]
     fn texels_are_sampled_exactly_and_mirrored() {
         let p = photos(4, 3, |x, y| (x + 10 * y) as f32 / 100.0);
+        let sharp = Footprint::round(0.0);
         // Upright: the bottom row (2) is centred half a texel above the ground, row 1
         // a texel higher (v is up, rows go down).
-        let v = p.sample(0, 2.0 * TEXEL_M, 1.5 * TEXEL_M, 0.0);
+        let v = p.sample(&AT_2CM, 2.0 * T, 1.5 * T, &sharp);
         assert!((v - 0.12).abs() < 1e-6, "{v}");
         // Mirrored: texel -1 is texel 0, texel 4 is texel 3.
-        assert!((p.sample(0, -TEXEL_M, 0.5 * TEXEL_M, 0.0) - 0.20).abs() < 1e-6);
-        assert!((p.sample(0, 4.0 * TEXEL_M, 0.5 * TEXEL_M, 0.0) - 0.23).abs() < 1e-6);
+        assert!((p.sample(&AT_2CM, -T, 0.5 * T, &sharp) - 0.20).abs() < 1e-6);
+        assert!((p.sample(&AT_2CM, 4.0 * T, 0.5 * T, &sharp) - 0.23).abs() < 1e-6);
+        // A facade mirrored left-right reads the photograph from the other side.
+        let flipped = Placement {
+            mirrored: true,
+            ..AT_2CM
+        };
+        assert_eq!(
+            p.sample(&flipped, -2.0 * T, 0.5 * T, &sharp),
+            p.sample(&AT_2CM, 2.0 * T, 0.5 * T, &sharp)
+        );
     }
 
     #[test]
@@ -168,20 +272,63 @@ mod tests {
         // A one-texel checkerboard: fine detail at level 0, uniform grey at level 1.
         let p = photos(64, 64, |x, y| ((x + y) % 2) as f32);
         let sharp: Vec<f64> = (0..8)
-            .map(|i| p.sample(0, i as f64 * TEXEL_M, 0.0, 0.0))
+            .map(|i| p.sample(&AT_2CM, i as f64 * T, 0.0, &Footprint::round(0.0)))
             .collect();
         assert!(sharp.iter().any(|&v| v > 0.99) && sharp.iter().any(|&v| v < 0.01));
         for i in 0..8 {
-            let v = p.sample(0, i as f64 * TEXEL_M * 1.37, 0.3, 2.0 * TEXEL_M);
+            let v = p.sample(
+                &AT_2CM,
+                i as f64 * T * 1.37,
+                0.3,
+                &Footprint::round(2.0 * T),
+            );
             assert!((v - 0.5).abs() < 1e-6, "{v}");
         }
     }
 
     #[test]
+    fn an_oblique_footprint_averages_along_its_long_axis_only() {
+        // Vertical one-texel stripes: they vary along u only.
+        let p = photos(64, 64, |x, _| (x % 2) as f32);
+        // Half a texel across, eight times longer along u: the stripes average out.
+        let along_u = Footprint {
+            minor: 0.5 * T,
+            cos: 0.125,
+            axis: [1.0, 0.0],
+        };
+        for i in 0..8 {
+            let v = p.sample(&AT_2CM, (10.0 + 0.3 * i as f64) * T, 0.7, &along_u);
+            assert!((v - 0.5).abs() < 1e-9, "{v}");
+        }
+        // The same footprint stretched along v keeps them sharp.
+        let along_v = Footprint {
+            axis: [0.0, 1.0],
+            ..along_u
+        };
+        let v = p.sample(&AT_2CM, 11.0 * T, 0.7, &along_v);
+        assert!((v - 1.0).abs() < 1e-9, "{v}");
+    }
+
+    #[test]
+    fn placements_vary_between_one_and_three_centimetres() {
+        let ps: Vec<Placement> = (0..200).map(Placement::of).collect();
+        assert!(ps.iter().all(|p| (0.01..=0.03).contains(&p.texel_m)));
+        let (lo, hi) = ps.iter().fold((1.0f64, 0.0f64), |a, p| {
+            (a.0.min(p.texel_m), a.1.max(p.texel_m))
+        });
+        assert!(lo < 0.012 && hi > 0.028, "{lo} {hi}");
+        let mirrored = ps.iter().filter(|p| p.mirrored).count();
+        assert!((60..140).contains(&mirrored), "{mirrored}");
+    }
+
+    #[test]
     fn a_directory_without_images_is_refused_by_name() {
         let t = tempfile::tempdir().unwrap();
-        let e = Photos::load(t.path()).unwrap_err().to_string();
+        let e = Photos::load(&[t.path().to_path_buf()])
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("no image files"), "{e}");
-        assert!(Photos::load(&t.path().join("missing")).is_err());
+        assert!(Photos::load(&[t.path().join("missing")]).is_err());
+        assert!(Photos::load(&[]).is_err());
     }
 }

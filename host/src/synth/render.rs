@@ -359,6 +359,7 @@ impl<'a> Frame<'a> {
             textureless: self.scene.textureless,
             flat: p.flat,
             photos: self.scene.photos.as_deref(),
+            ray: d,
         };
         let depth = hit.t * self.cam.focal_mm / norm;
         (shade(&p.material, &surface, &self.scene.light), i, depth)
