@@ -157,3 +157,42 @@ fn depth_maps_give_true_stereo_correspondences() {
     // Rounding to the nearest pixel leaves a little texture difference; a wrong match leaves much more.
     assert!(med < 0.02 && med < med_shift / 3.0, "{med} vs {med_shift}");
 }
+
+/// `synth --size WxH` (`synth::resample`) samples the same sensor with other pixels:
+/// the field of view, the principal point and the distortion (all in mm) stay, so a
+/// point lands at the same place on the sensor, i.e. at the scaled pixel position, and
+/// the renderer still draws it there (seed 000's lens at 640x480 and 320x240).
+#[test]
+fn a_resampled_lens_keeps_its_field_of_view_and_distortion() {
+    use phototraverse_host::synth::resample;
+    let cam = seed_left();
+    let pose = Pose::from_degrees(89.0, 1.5, -3.0, [-2.0, 5.0, 1.7]);
+    for (w, h) in [(640u32, 480u32), (320, 240)] {
+        let small = resample(&cam, w, h).unwrap();
+        let (sx, sy) = (
+            w as f64 / cam.width_px as f64,
+            h as f64 / cam.height_px as f64,
+        );
+        // The image corners see the same directions.
+        let a = cam.pixel_to_corrected(-0.5, -0.5);
+        let b = small.pixel_to_corrected(-0.5, -0.5);
+        assert!((a[0] - b[0]).abs() < 1e-12 && (a[1] - b[1]).abs() < 1e-12);
+        for i in 0..20 {
+            let p = [
+                -2.0 + 5.0 * (i as f64 * 0.7).sin(),
+                5.0 + 8.0 + i as f64,
+                1.7 + 2.0 * (i as f64 * 1.3).cos(),
+            ];
+            let [c, r] = project_to_pixel(&pose, &cam, &p).unwrap();
+            let [c2, r2] = project_to_pixel(&pose, &small, &p).unwrap();
+            assert!(
+                (c2 - ((c + 0.5) * sx - 0.5)).abs() < 1e-6
+                    && (r2 - ((r + 0.5) * sy - 0.5)).abs() < 1e-6,
+                "{w}x{h}: ({c}, {r}) -> ({c2}, {r2})"
+            );
+        }
+        let (err, n) = max_disc_error(&small, &pose, 2.5);
+        println!("seed 000 lens at {w}x{h}: max centroid error {err:.4} px over {n} discs");
+        assert!(err < 0.1, "{w}x{h}: {err}");
+    }
+}
