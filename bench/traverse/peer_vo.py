@@ -20,11 +20,13 @@ is flagged "lost".
 
 Both dataset layouts are read. KITTI (calib.txt P0/P1, image_0/, image_1/) is rectified already.
 A rig.toml dataset (lens distortion, converging cameras: the photogrammetric model of
-docs/datasets.md) is first rectified as an OpenCV user would with their calibration: both images
-are remapped (cv2.remap, bilinear) onto a common rectified pinhole pair whose x axis is the base;
-the maps invert the rig's distortion exactly (fixed-point iteration of its correction), so no
-model conversion error enters. The odometry runs on the rectified pair and its poses are rotated
-back into the original left camera frame before they are written.
+docs/datasets.md; left/ and right/, or seed-style E*/D* images) is first rectified as an OpenCV
+user would with their calibration: cv2.stereoRectify on the rig's K and relative orientation
+converted to OpenCV's pixel model and axes gives R1, R2, P1, P2; both images are remapped
+(cv2.remap, bilinear) with tables that invert the rig's distortion exactly (fixed-point
+iteration of its correction, which OpenCV's distortion model could only approximate). The
+odometry runs on the rectified pair and its poses are rotated back into the original left
+camera frame (R1) before they are written.
 
 Timing per epoch excludes image decoding: wall time (time.perf_counter) and this thread's CPU
 time (time.thread_time), per stage and in total. Writes OUT/poses.txt and OUT/peer.json (per-epoch
@@ -136,9 +138,32 @@ def distorted_pixels(cam, xc, yc):
     return c.astype(np.float32), r.astype(np.float32)
 
 
+def camera_matrix(cam):
+    """OpenCV's K of a rig.toml camera without its distortion. Photo-coordinates are mm
+    from the image centre ((W-1)/2, (H-1)/2 in pixels) with y up; the principal point
+    (x0, y0) is in them: fx = f/sx, fy = f/sy, cx = (W-1)/2 + x0/sx, cy = (H-1)/2 - y0/sy."""
+    sx, sy = cam["pixel_size_mm"]
+    x0, y0 = cam["principal_point_mm"]
+    f = cam["focal_mm"]
+    return np.array([[f / sx, 0.0, (cam["width_px"] - 1) / 2.0 + x0 / sx],
+                     [0.0, f / sy, (cam["height_px"] - 1) / 2.0 - y0 / sy],
+                     [0.0, 0.0, 1.0]])
+
+
 class Rectifier:
-    """Remaps a rig.toml pair onto a rectified pinhole pair (left camera's focal length in
-    pixels, the images' size, x along the base) and maps its poses back."""
+    """Rectifies a rig.toml pair as an OpenCV user would: cv2.stereoRectify on the rig's
+    pinhole part (K of each camera, R and T of the right camera in OpenCV's axes) gives the
+    rectifying rotations R1, R2 and the common projections P1, P2; the remap tables are
+    built here rather than by cv2.initUndistortRectifyMap, because the rig's distortion is
+    the photogrammetric one (a correction of the measured coordinates, in mm, y up), which
+    OpenCV's model can only approximate: each rectified pixel's ray goes back through R_i
+    into camera i and onto the pixel where the rig's model measures it (the correction
+    inverted by fixed-point iteration), exactly. The rectified focal length is raised
+    until every rectified pixel comes from inside its image (no black borders). Poses of
+    the rectified left camera are rotated back into the original left camera's frame
+    (R1). OpenCV's default scaling (alpha -1) is kept; alpha 0 or 1 move the drift by
+    +-0.1 % on 100 epochs of seed2014 (0.31 and 0.40 % against 0.22 %), the noise of
+    resampling."""
 
     def __init__(self, rig):
         left, right = rig["left"], rig["right"]
@@ -146,40 +171,74 @@ class Rectifier:
         mrel = rotation(*(np.radians(rel.get(k, 0.0)) for k in ("omega_deg", "phi_deg", "kappa_deg")))
         base = np.array(rel.get("base_mm", [0.0, 0.0, 0.0])) / 1000.0
         w, h = left["width_px"], left["height_px"]
-        f = left["focal_mm"] / left["pixel_size_mm"][0]
-        self.K = np.array([[f, 0, (w - 1) / 2.0], [0, f, (h - 1) / 2.0], [0, 0, 1]])
-        # Rectified axes in the left camera's KITTI frame: x along the base.
-        t = F @ base
-        e1 = t / np.linalg.norm(t)
-        e2 = np.array([-t[1], t[0], 0.0])
-        e2 /= np.linalg.norm(e2)
-        self.R = np.vstack([e1, e2, np.cross(e1, e2)])  # left KITTI -> rectified
-        self.baseline = float(np.linalg.norm(base))
+        if (right["width_px"], right["height_px"]) != (w, h):
+            raise DatasetError("rig.toml: the cameras' image sizes differ")
+        # Our cameras: x right, y up, z back; X_R = Mrel (X_L - b). OpenCV's: x right, y
+        # down, z forward (F), X_R = R X_L + T.
+        R = F @ mrel @ F
+        T = (-F @ mrel @ base).reshape(3, 1)
+        K1, K2 = camera_matrix(left), camera_matrix(right)
+        R1, R2, P1, P2, _, _, _ = cv2.stereoRectify(
+            K1, np.zeros(5), K2, np.zeros(5), (w, h), R, T,
+            flags=cv2.CALIB_ZERO_DISPARITY)
+        if P2[0, 3] >= 0.0 or abs(P2[1, 3]) > 1e-9 * abs(P2[0, 3]):
+            raise DatasetError("rig.toml: the base is not along the left camera's x axis")
+        self.R1, self.R2 = R1, R2
+        self.size = (w, h)
+        self.cams = (left, right)
         u, v = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
-        rays = np.linalg.inv(self.K) @ np.vstack([u.ravel(), v.ravel(), np.ones(u.size)])
-        in_left = F @ (self.R.T @ rays)  # photogrammetric left camera frame
-        self.maps = []
-        for cam, d in ((left, in_left), (right, mrel @ in_left)):
-            fc = cam["focal_mm"]
-            xc, yc = -fc * d[0] / d[2], -fc * d[1] / d[2]
-            c, r = distorted_pixels(cam, xc, yc)
-            self.maps.append((c.reshape(h, w), r.reshape(h, w)))
+        self.pixels = np.vstack([u.ravel(), v.ravel(), np.ones(u.size)])
+        # The smallest zoom (>= 1) at which both images cover the rectified frame.
+        lo, hi = 1.0, 1.0
+        while not self._covered(P1, P2, hi) and hi < 2.0:
+            lo, hi = hi, hi * 1.02
+        for _ in range(12):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if self._covered(P1, P2, mid) else (mid, hi)
+        self.P1, self.P2 = self._zoomed(P1, hi), self._zoomed(P2, hi)
+        self.maps = [self._map(i, self.P1 if i == 0 else self.P2) for i in (0, 1)]
+
+    @staticmethod
+    def _zoomed(P, zoom):
+        """P with its focal length (and so P2's f * base term) times zoom."""
+        Z = P.copy()
+        Z[0, 0] *= zoom
+        Z[1, 1] *= zoom
+        Z[0, 3] *= zoom
+        return Z
+
+    def _map(self, camera, P):
+        """Source pixel coordinates (c, r) in camera's image of every rectified pixel."""
+        w, h = self.size
+        Ri = self.R1 if camera == 0 else self.R2
+        rays = Ri.T @ (np.linalg.inv(P[:, :3]) @ self.pixels)  # OpenCV camera frame
+        d = F @ rays  # photogrammetric camera frame (z back)
+        cam = self.cams[camera]
+        f = cam["focal_mm"]
+        c, r = distorted_pixels(cam, -f * d[0] / d[2], -f * d[1] / d[2])
+        return c.reshape(h, w), r.reshape(h, w)
+
+    def _covered(self, P1, P2, zoom):
+        w, h = self.size
+        for camera, P in ((0, P1), (1, P2)):
+            c, r = self._map(camera, self._zoomed(P, zoom))
+            if c.min() < 0.0 or r.min() < 0.0 or c.max() > w - 1 or r.max() > h - 1:
+                return False
+        return True
 
     def projections(self):
-        P0 = np.hstack([self.K, np.zeros((3, 1))])
-        P1 = P0.copy()
-        P1[0, 3] = -self.K[0, 0] * self.baseline
-        return P0, P1
+        """P0, P1 of the rectified pair (KITTI's names: left, right)."""
+        return self.P1, self.P2
 
     def remap(self, img, camera):
         mx, my = self.maps[camera]
-        return cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+        return cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
     def to_original(self, pose):
         """A pose of the rectified left camera in its epoch-0 frame as the original left
-        camera's pose in its own epoch-0 frame (the two frames differ by R only)."""
+        camera's pose in its own epoch-0 frame (the two frames differ by R1 only)."""
         R4 = np.eye(4)
-        R4[:3, :3] = self.R
+        R4[:3, :3] = self.R1
         return R4.T @ pose @ R4
 
 
@@ -201,7 +260,18 @@ def image_pairs(root, left_dir, right_dir):
 def open_rig_dataset(root):
     rect = Rectifier(read_rig(os.path.join(root, "rig.toml")))
     P0, P1 = rect.projections()
-    return P0, P1, image_pairs(root, "left", "right"), rect
+    if os.path.isdir(os.path.join(root, "left")):
+        return P0, P1, image_pairs(root, "left", "right"), rect
+    # Seed style: E*.ext (esquerda, left) and D*.ext (direita, right) in the dataset itself.
+    files = sorted(f for f in os.listdir(root) if f.lower().endswith(IMAGE_EXT))
+    left = {epoch_key(f): os.path.join(root, f) for f in files if f.upper().startswith("E")}
+    right = {epoch_key(f): os.path.join(root, f) for f in files if f.upper().startswith("D")}
+    if not left:
+        raise DatasetError(f"{root}: neither left/ nor seed-style E*/D* images")
+    missing = [k for k in left if k not in right]
+    if missing:
+        raise DatasetError(f"{root}: no right image for epoch {missing[0]}")
+    return P0, P1, [(left[k], right[k]) for k in sorted(left, key=lambda k: left[k])], rect
 
 
 def open_dataset(root):
