@@ -7,6 +7,10 @@ sequence, per stage), with the ratios.
 usage: run.py CACHE [--scenes straight,curves,curves-real] [--frames 100] [--bin PATH]
               [--results bench/traverse/RESULTS.md] [--cpu-split]
 
+Scenes: see SCENES below; `all` is every one of them. A scene name with `@320` (e.g.
+`handheld@320`, `all@320`) renders the scene at 320x240 (`synth --size 320x240`, the same
+field of view) and runs ours with configs/embedded-320x240.toml.
+
 CACHE keeps the synthesized scenes (CACHE/<scene>-<frames>/, made once and reused) and the runs
 (CACHE/runs/<scene>-<frames>/{ours,peer}/ with the evaluation JSONs). Scenes are processed one at
 a time (the machine is shared); ours and the peer run one after the other on the same data.
@@ -28,9 +32,17 @@ import steps
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))
-# Real photographs for the facades of the photo-* scenes (the development data beside the
-# repository: Leuven facades, an aerial pair, a cluttered scene).
-PHOTOS = os.path.join(os.path.dirname(REPO), "shared", "data", "pairs")
+# Real photographs for the facades of the photo-* scenes: the development data beside the
+# repository (../shared/data: Leuven facades, an aerial view, a cluttered desk, Middlebury's
+# motorcycle, OpenCV's aloe plant; one of each pair).
+DATA = os.path.join(os.path.dirname(REPO), "shared", "data")
+PHOTOS = ",".join(os.path.join(DATA, f) for f in (
+    "pairs/leuvenA.jpg", "pairs/aero1.jpg", "pairs/box_in_scene.png",
+    "stereo/motorcycle_left.png", "stereo/aloeL.jpg"))
+# The small variant of a scene (`NAME@320`): its size and our configuration.
+SMALL = "@320"
+SMALL_SIZE = "320x240"
+SMALL_CONFIG = os.path.join(REPO, "configs", "embedded-320x240.toml")
 
 # name -> synth arguments (scene and options); frames are appended.
 SCENES = {
@@ -43,25 +55,68 @@ SCENES = {
     # The same data as curves-real with the rig's relative orientation and the right
     # camera's interior estimated (`run --estimate-rig`), as issue 7's bar asks.
     "curves-real-rig": ["--scene", "curves", "--realistic"],
+    # Seed 000's rig (576x384, distortion, converging cameras, 0.40 m base) on a straight
+    # street, level (rig.toml; the peer rectifies it first).
+    "seed2014": ["--scene", "seed2014"],
     # Seed 000's hand-held rig (0.40 m base, distortion, converging cameras, 2 deg tilt)
     # walking: +-1 deg on every angle, +-3 cm of bob and sway, 1 m per epoch (rig.toml;
     # the peer rectifies it first).
     "handheld": ["--scene", "handheld"],
-    # 1.2 km at 2 m per epoch: four turns of 20 to 60 m radius, a climb and a descent.
+    # 1.2 km at 2 m per epoch: turns of 25, 20, 60 and 40 m radius, grades of 2.5..4 %,
+    # narrow stretches (facades 4..5 m away) and open country (buildings 30..110 m away).
     "drive": ["--scene", "drive"],
-    # Moving cars: one ahead in our lane closing from 9 to 4 m (up to ~40 % of the image),
-    # oncoming and overtaking ones.
+    # Moving vehicles covering up to ~45 % of the image: a van overtaking and braking
+    # ahead of us (closest 4 m), oncoming cars, a van and a bus, crossing ones.
     "traffic": ["--scene", "traffic"],
-    # Facades textured with real photographs (2 cm per texel), where a SIFT odometry is at
-    # its best.
+    # Facades textured with real photographs (1..3 cm per texel), where a SIFT odometry is
+    # at its best.
     "photo-straight": ["--scene", "straight", "--photo-textures", PHOTOS],
     "photo-curves": ["--scene", "curves", "--photo-textures", PHOTOS],
 }
-# Scenes whose length is their own (epochs), whatever --frames says.
+# Epochs per scene without --frames (default 100).
 FRAMES_OF = {"drive": 600}
 # Scenes that reuse another scene's dataset, and extra `run` options of our side.
 DATASET_OF = {"curves-real-rig": "curves-real"}
 OURS_ARGS = {"curves-real-rig": ["--estimate-rig"]}
+
+
+def base(scene):
+    """The scene without its `@320`."""
+    return scene[:-len(SMALL)] if scene.endswith(SMALL) else scene
+
+
+def small(scene):
+    return scene.endswith(SMALL)
+
+
+def synth_args(scene):
+    return SCENES[base(scene)] + (["--size", SMALL_SIZE] if small(scene) else [])
+
+
+def ours_args(scene):
+    return OURS_ARGS.get(base(scene), []) + (["--config", SMALL_CONFIG] if small(scene) else [])
+
+
+def dataset_of(scene):
+    return DATASET_OF.get(base(scene), base(scene)) + (SMALL if small(scene) else "")
+
+
+def frames_of(scene, frames):
+    """--frames if given, else the scene's own length."""
+    return frames if frames is not None else FRAMES_OF.get(base(scene), 100)
+
+
+def expand(names):
+    """`all` and `all@320` to every scene (at 320x240)."""
+    out = []
+    for name in names:
+        if base(name) == "all":
+            out += [s + (SMALL if small(name) else "") for s in SCENES]
+        else:
+            out.append(name)
+    return out
+
+
 # Stage order of the table; stages missing on one side are shown as "-".
 OUR_STAGES = ["sift_left", "sift_right", "stereo_match", "assemble", "initial_values", "adjust"]
 PEER_STAGES = ["sift_left", "sift_right", "stereo_match", "triangulate", "temporal_match", "pnp"]
@@ -118,7 +173,7 @@ def synthesize(binary, cache, scene, frames):
     tmp = ds + ".partial"
     shutil.rmtree(tmp, ignore_errors=True)
     os.makedirs(cache, exist_ok=True)
-    cmd = [binary, "synth", *SCENES[scene], "--frames", str(frames), "--out", tmp]
+    cmd = [binary, "synth", *synth_args(scene), "--frames", str(frames), "--out", tmp]
     print(f"[{scene}] synthesizing {frames} frames ...", flush=True)
     wall, _ = run_timed(cmd, tmp + ".log")
     shutil.rmtree(ds, ignore_errors=True)
@@ -133,7 +188,7 @@ def evaluate(binary, ds, poses, out_json, log):
         return json.load(f)
 
 
-def cpu_split(binary, ds, runs, frames, traverse_cpu):
+def cpu_split(binary, ds, runs, frames, traverse_cpu, config=()):
     """Our CPU per epoch split by running the same dataset with lighter firmware processors:
     `stats` (decoding, link, framing: the host's share), `sift` (+ SIFT on both images); the
     traverse's remainder is matching, initial values and adjustment. CPU time does not depend
@@ -143,7 +198,8 @@ def cpu_split(binary, ds, runs, frames, traverse_cpu):
         out = os.path.join(runs, f"ours_{proc}")
         shutil.rmtree(out, ignore_errors=True)
         _, c = run_timed([binary, "run", ds, "--out", out, "--link", "inproc", "--quiet",
-                          "--fw-processor", proc], os.path.join(runs, f"ours_{proc}.log"))
+                          "--fw-processor", proc, *config],
+                         os.path.join(runs, f"ours_{proc}.log"))
         cpu[proc] = c * 1e3 / frames
     return {"host_decode_link": cpu["stats"], "sift_both": cpu["sift"] - cpu["stats"],
             "match_adjust_rest": traverse_cpu - cpu["sift"]}
@@ -166,18 +222,18 @@ def common_fields(ev, epochs, cpu_s, wall_s):
 
 
 def run_scene(binary, cache, scene, frames, split=False):
-    ds, synth_wall = synthesize(binary, cache, DATASET_OF.get(scene, scene), frames)
+    ds, synth_wall = synthesize(binary, cache, dataset_of(scene), frames)
     runs = os.path.join(cache, "runs", f"{scene}-{frames}")
     ours_dir, peer_dir = os.path.join(runs, "ours"), os.path.join(runs, "peer")
     for d in (ours_dir, peer_dir):
         shutil.rmtree(d, ignore_errors=True)
     os.makedirs(runs, exist_ok=True)
 
-    print(f"[{scene}] ours: phototraverse run --link inproc {' '.join(OURS_ARGS.get(scene, []))}...",
+    print(f"[{scene}] ours: phototraverse run --link inproc {' '.join(ours_args(scene))}...",
           flush=True)
     ours_wall, ours_cpu = run_timed(
         [binary, "run", ds, "--out", ours_dir, "--link", "inproc", "--quiet",
-         *OURS_ARGS.get(scene, [])],
+         *ours_args(scene)],
         os.path.join(runs, "ours.log"))
     print(f"[{scene}] peer: peer_vo.py ...", flush=True)
     peer_wall, peer_cpu = run_timed(
@@ -202,7 +258,7 @@ def run_scene(binary, cache, scene, frames, split=False):
     result = {
         "scene": scene,
         "frames": len(oe),
-        "synth": SCENES[scene],
+        "synth": synth_args(scene),
         "dataset": ds,
         "path_length_m": ours_eval.get("path_length_m"),
         "ours": {
@@ -229,7 +285,8 @@ def run_scene(binary, cache, scene, frames, split=False):
     if split:
         print(f"[{scene}] ours: CPU split (--fw-processor stats, sift) ...", flush=True)
         result["ours"]["cpu_split_ms"] = cpu_split(
-            binary, ds, runs, len(oe), result["ours"]["process_cpu_ms_per_epoch"])
+            binary, ds, runs, len(oe), result["ours"]["process_cpu_ms_per_epoch"],
+            ["--config", SMALL_CONFIG] if small(scene) else [])
     with open(os.path.join(runs, "result.json"), "w") as f:
         json.dump(result, f, indent=1)
     return result
@@ -265,10 +322,17 @@ def table(results):
     return "\n".join(lines)
 
 
+def shown(args):
+    """Arguments as a reader of RESULTS.md would type them: paths relative to the repository."""
+    top = os.path.dirname(REPO) + os.sep
+    return " ".join(",".join(os.path.relpath(p, REPO) if p.startswith(top) else p
+                             for p in a.split(",")) for a in args)
+
+
 def ours_options(scene):
     """`, ours with ...` when our side runs with extra options."""
-    extra = OURS_ARGS.get(scene)
-    return f"; ours with `run {' '.join(extra)}`" if extra else ""
+    extra = ours_args(scene)
+    return f"; ours with `run {shown(extra)}`" if extra else ""
 
 
 def details(results):
@@ -276,7 +340,7 @@ def details(results):
     for r in results:
         o, p = r["ours"], r["peer"]
         lines += [
-            f"- **{r['scene']}** (`phototraverse synth {' '.join(r['synth'])} --frames {r['frames']}`, "
+            f"- **{r['scene']}** (`phototraverse synth {shown(r['synth'])} --frames {r['frames']}`, "
             f"{r['path_length_m']:.1f} m{ours_options(r['scene'])}):",
             f"  - ours: median stage ms (wall, in the firmware): {fmt_stages(o['stage_ms'])}; "
             f"process CPU {o['process_cpu_ms_per_epoch']:.1f} ms/epoch incl. decoding and link; "
@@ -338,24 +402,30 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("cache", help="directory of synthesized scenes and runs (reused)")
     ap.add_argument("--scenes", default="straight,curves,curves-real",
-                    help=f"comma-separated, from {', '.join(SCENES)}")
-    ap.add_argument("--frames", type=int, default=100)
+                    help=f"comma-separated, from {', '.join(SCENES)}; all = every one; "
+                         f"NAME{SMALL} at 320x240 with configs/embedded-320x240.toml")
+    ap.add_argument("--frames", type=int,
+                    help="epochs of every scene (default: 100; drive 600, its 1.2 km)")
     ap.add_argument("--cpu-split", action="store_true",
                     help="also split our CPU per epoch into host, SIFT and the rest (2 more runs)")
     ap.add_argument("--bin", default=os.path.join(REPO, "target", "release", "phototraverse"))
     ap.add_argument("--results", default=os.path.join(HERE, "RESULTS.md"),
                     help="markdown file written with the table ('-' to skip)")
     args = ap.parse_args()
-    scenes = [s for s in args.scenes.split(",") if s]
-    unknown = [s for s in scenes if s not in SCENES]
+    scenes = expand([s for s in args.scenes.split(",") if s])
+    unknown = [s for s in scenes if base(s) not in SCENES]
     if unknown:
         ap.error(f"unknown scene(s) {', '.join(unknown)}; known: {', '.join(SCENES)}")
+    photos = [s for s in scenes if "--photo-textures" in SCENES[base(s)]]
+    missing = [f for f in PHOTOS.split(",") if not os.path.exists(f)]
+    if photos and missing:
+        ap.error(f"{', '.join(photos)} need the photographs {', '.join(missing)}")
     if not os.access(args.bin, os.X_OK):
         ap.error(f"{args.bin}: no binary (cargo build --release -p phototraverse-host)")
     before = uptime()
     results = []
     for scene in scenes:
-        frames = FRAMES_OF.get(scene, args.frames)
+        frames = frames_of(scene, args.frames)
         r = run_scene(args.bin, args.cache, scene, frames, args.cpu_split)
         results.append(r)
         o, p = r["ours"], r["peer"]
