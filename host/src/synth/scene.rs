@@ -743,24 +743,17 @@ fn zone_extras(
                             v3(b.offset(side * w)),
                             v3(b.offset(side * verge)),
                         ];
-                        let material = Material::Field { seed: field_seed };
-                        let tris: &[[usize; 3]] = if path.segments[i].curvature == 0.0 {
-                            &[]
+                        // A quad on straights, two triangles on arcs (as the ground).
+                        let pieces: &[&[usize]] = if path.segments[i].curvature == 0.0 {
+                            &[&[0, 1, 2, 3]]
                         } else {
-                            &[[0, 1, 2], [0, 2, 3]]
+                            &[&[0, 1, 2], &[0, 2, 3]]
                         };
-                        if tris.is_empty() {
+                        for piece in pieces {
+                            let points: Vec<V3> = piece.iter().map(|&j| quad[j]).collect();
                             prims.push(Primitive {
-                                shape: Shape::polygon(&quad, None),
-                                material,
-                                flat: false,
-                                group: FIELD_GROUP,
-                            });
-                        }
-                        for t in tris {
-                            prims.push(Primitive {
-                                shape: Shape::polygon(&[quad[t[0]], quad[t[1]], quad[t[2]]], None),
-                                material,
+                                shape: Shape::polygon(&points, None),
+                                material: Material::Field { seed: field_seed },
                                 flat: false,
                                 group: FIELD_GROUP,
                             });
