@@ -48,6 +48,6 @@ pub use geometry::{Camera, InteriorCorrections, RigParams};
 pub use intersection::{intersect, IntersectError, Intersection, Ray};
 pub use resection::{resect, Correspondence, ResectionConfig, ResectionError, ResectionResult};
 pub use window::{
-    AdjustConfig, AdjustError, ConstraintSigmas, InteriorSigmas, Observation, Report, Robust,
-    Window,
+    AdjustConfig, AdjustError, CalibrationTest, ConstraintSigmas, InteriorSigmas, Observation,
+    Report, Robust, Window,
 };

@@ -1437,3 +1437,138 @@ fn right_focal_error_is_absorbed_by_the_self_calibration() {
         "base {bent:?} ({off} sigma), sigma0 {s0}"
     );
 }
+
+/// What a window over the whole scene found with the calibration `start`: held (and
+/// tested, then corrected once when `correct`) or, without `hold`, simply fixed.
+struct HeldRun {
+    poses: Vec<Pose>,
+    /// Test statistic before and after the correction (0 when not tested).
+    statistic: [f64; 2],
+    dof: usize,
+    /// RMS error of the points against the truth, metres.
+    rms: f64,
+    rig: RigParams,
+    interior: InteriorCorrections,
+}
+
+fn held_run(s: &Scene, start: &Rig, hold: bool, correct: bool) -> HeldRun {
+    let cfg = AdjustConfig {
+        window: s.poses.len(),
+        max_points: s.points.len(),
+        max_observations: s.obs.len(),
+        estimate_rig: hold,
+        self_calibration: hold.then_some(InteriorSigmas {
+            principal_point_mm: [1e-4, 2.0 * PIXEL_MM],
+            focal_mm: [1e-4, 0.01 * 8.0],
+        }),
+        hold_calibration: hold,
+        robust: Robust::None,
+        sigmas: loose_rig_prior(),
+        ..AdjustConfig::default()
+    };
+    let mut mem = arena_for(&cfg);
+    let mut arena = Arena::new(&mut mem);
+    let mut w = Window::new(cfg, start, &mut arena).unwrap();
+    w.set_base_length(s.rig.base_length());
+    for p in &s.poses {
+        w.add_epoch(p, 0.0).unwrap();
+    }
+    let ids: Vec<u32> = s.points.iter().map(|p| w.add_point(*p).unwrap()).collect();
+    let wt = 1.0 / (SIGMA_MM * SIGMA_MM);
+    for (e, c, p, xy, _) in &s.obs {
+        let cam = if *c == 0 { Camera::Left } else { Camera::Right };
+        w.add_observation(Observation::new(*e as u32, cam, ids[*p], *xy, [wt, wt]))
+            .unwrap();
+    }
+    let mut r = w.solve().unwrap();
+    let mut statistic = [0.0; 2];
+    let mut dof = 0;
+    if hold {
+        let t = w.calibration_test(r.sigma0).unwrap();
+        statistic[0] = t.statistic;
+        dof = t.dof;
+        if correct {
+            w.correct_calibration(&t);
+            r = w.solve().unwrap();
+            statistic[1] = w.calibration_test(r.sigma0).unwrap().statistic;
+        }
+    }
+    assert!(r.converged, "{r:?}");
+    let sq: f64 = ids
+        .iter()
+        .zip(&s.points)
+        .filter_map(|(id, t)| {
+            w.point(*id)
+                .map(|p| (0..3).map(|a| (p[a] - t[a]).powi(2)).sum::<f64>())
+        })
+        .sum();
+    HeldRun {
+        poses: (0..w.n_epochs())
+            .map(|i| w.epoch_pose(i).unwrap())
+            .collect(),
+        statistic,
+        dof,
+        rms: libm::sqrt(sq / ids.len() as f64),
+        rig: w.rig(),
+        interior: w.interior(),
+    }
+}
+
+#[test]
+fn a_held_calibration_leaves_the_poses_of_a_fixed_one() {
+    let s = scene(93, 5, 300, 0.0);
+    let fixed = held_run(&s, &s.rig, false, false);
+    let held = held_run(&s, &s.rig, true, false);
+    for (a, b) in fixed.poses.iter().zip(&held.poses) {
+        let (pa, pb) = (a.to_params(), b.to_params());
+        for i in 0..6 {
+            assert!((pa[i] - pb[i]).abs() < 1e-9, "{pa:?} vs {pb:?}");
+        }
+    }
+    // A right calibration: the score test stays below its 0.1 % critical value.
+    let critical = crate::adjust::quality::chi2_quantile(0.999, held.dof as f64);
+    assert_eq!(held.dof, 12);
+    assert!(
+        held.statistic[0] < critical,
+        "statistic {} >= {critical} on the true calibration",
+        held.statistic[0]
+    );
+}
+
+#[test]
+fn a_wrong_calibration_fails_the_test_and_its_correction_recovers_the_points() {
+    // The calibration has the right camera's principal point 1 px off in x and 0.6 %
+    // off in focal length, and the rig's phi 0.05 deg off: the observations come from
+    // the true rig.
+    let s = scene(94, 5, 300, 0.0);
+    let mut wrong = s.rig;
+    wrong.right.principal_point_mm[0] += PIXEL_MM;
+    wrong.right.focal_mm *= 1.006;
+    wrong.relative_angles[1] += 0.05f64.to_radians();
+    let truth = held_run(&s, &s.rig, false, false);
+    let held = held_run(&s, &wrong, true, true);
+    let critical = crate::adjust::quality::chi2_quantile(0.999, held.dof as f64);
+    assert!(
+        held.statistic[0] > 10.0 * critical,
+        "statistic {} against {critical}",
+        held.statistic[0]
+    );
+    // One correction takes the calibration to where the test passes...
+    assert!(
+        held.statistic[1] < critical,
+        "after the correction: {} against {critical}",
+        held.statistic[1]
+    );
+    // ... and the right focal length to the truth within 0.05 %.
+    let df = held.interior[5] - (s.rig.right.focal_mm - wrong.right.focal_mm);
+    assert!(df.abs() < 5e-4 * 8.0, "focal correction off by {df} mm");
+    let uncorrected = held_run(&s, &wrong, true, false);
+    assert!(
+        held.rms < 0.5 * uncorrected.rms && held.rms < 1.5 * truth.rms,
+        "point RMS {} m corrected, {} m held wrong, {} m with the truth",
+        held.rms,
+        uncorrected.rms,
+        truth.rms
+    );
+    assert!(held.rig.angles[1] != wrong.relative_angles[1]);
+}

@@ -178,6 +178,11 @@ pub struct AdjustConfig {
     /// information of observations that stay in the window, so it counts them twice at
     /// factor 1). Without fixed epochs the prior is not inflated.
     pub carried_prior_inflation: f64,
+    /// With `estimate_rig` or `self_calibration`: their blocks start held at the
+    /// calibration (the poses are adjusted as with a fixed rig) and change only through
+    /// [`Window::correct_calibration`], after [`Window::calibration_test`] found the
+    /// observations call for it.
+    pub hold_calibration: bool,
 }
 
 impl Default for AdjustConfig {
@@ -197,8 +202,25 @@ impl Default for AdjustConfig {
             keep_exclusions: false,
             fixed_epochs: 0,
             carried_prior_inflation: 1.0,
+            hold_calibration: false,
         }
     }
+}
+
+/// What the observations of the window say about the calibration (the rig's relative
+/// orientation and the interior orientation) held at its current value: the score test
+/// of the held parameters (see [`Window::calibration_test`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CalibrationTest {
+    /// `g^T N^-1 g / sigma0^2`: the decrease of `vTPv` (in units of the a-posteriori
+    /// variance) that freeing the calibration would bring, chi-square with `dof`
+    /// degrees of freedom when the calibration is right.
+    pub statistic: f64,
+    pub dof: usize,
+    /// The correction a free adjustment would make (one Gauss-Newton step): the rig's
+    /// `[omega, phi, kappa, bx, by, bz]` and the interior `[x0_L, y0_L, f_L, x0_R, y0_R, f_R]` (mm).
+    pub rig: [f64; 6],
+    pub interior: InteriorCorrections,
 }
 
 /// Why the adjustment refused or failed.
@@ -485,6 +507,10 @@ pub struct Window<'a> {
     dropped_points: usize,
     dropped_observations: usize,
     singular_epoch: Option<usize>,
+    /// The rig and interior blocks take part in the adjustment (see [`Window::drop_calibration`]).
+    calibration_active: bool,
+    /// They are held at their values ([`AdjustConfig::hold_calibration`]).
+    calibration_held: bool,
 }
 
 impl AdjustConfig {
@@ -670,6 +696,8 @@ impl<'a> Window<'a> {
             dropped_points: 0,
             dropped_observations: 0,
             singular_epoch: None,
+            calibration_active: true,
+            calibration_held: cfg.hold_calibration,
         })
     }
 
@@ -1229,20 +1257,39 @@ impl<'a> Window<'a> {
     // ----- the solver -----
 
     fn rig_block(&self) -> Option<usize> {
-        self.cfg.estimate_rig.then_some(self.n_epochs)
+        (self.cfg.estimate_rig && self.calibration_active).then_some(self.n_epochs)
     }
 
     /// Block of the interior orientation corrections: the last one.
     fn interior_block(&self) -> Option<usize> {
         self.cfg
             .self_calibration
-            .map(|_| self.n_epochs + self.cfg.estimate_rig as usize)
+            .filter(|_| self.calibration_active)
+            .map(|_| self.n_epochs + self.rig_block().is_some() as usize)
     }
 
     fn n_cam(&self) -> usize {
         6 * (self.n_epochs
-            + self.cfg.estimate_rig as usize
-            + self.cfg.self_calibration.is_some() as usize)
+            + self.rig_block().is_some() as usize
+            + self.interior_block().is_some() as usize)
+    }
+
+    /// With the calibration held, takes the rig and interior blocks out of the reduced
+    /// system just built (unit diagonal, no coupling, zero right-hand side): the poses
+    /// are solved as with a fixed calibration and the held blocks' step is zero.
+    fn hold_blocks(&mut self) {
+        if !self.calibration_held {
+            return;
+        }
+        let nc = self.n_cam();
+        let first = 6 * self.n_epochs;
+        for r in first..nc {
+            for c in 0..=r {
+                self.reduced[r * nc + c] = 0.0;
+            }
+            self.reduced[r * nc + r] = 1.0;
+            self.rhs[r] = 0.0;
+        }
     }
 
     /// Scratch index of the rig's block (the epochs use their slot).
@@ -1382,16 +1429,22 @@ impl<'a> Window<'a> {
                     }
                 }
             }
-            // A fixed epoch's observation constrains the point only.
-            let At::Window(slot) = at else { continue };
             if !want_cam {
                 continue;
             }
             // Camera blocks touched by this observation (scratch index, Jacobian):
-            // its epoch, the rig (right camera), the interior orientation.
+            // its epoch (a fixed epoch's pose is not adjusted), the rig (right
+            // camera), the interior orientation; the calibration is shared by all.
+            let slot = match at {
+                At::Window(slot) => Some(slot),
+                At::Fixed(_) => None,
+            };
             let on_rig = cam == Camera::Right && rig_block.is_some();
+            if slot.is_none() && !on_rig && interior_block.is_none() {
+                continue;
+            }
             let blocks = [
-                Some((slot, &pr.d_pose)),
+                slot.map(|slot| (slot, &pr.d_pose)),
                 on_rig.then_some((self.rig_scratch(), &pr.d_rig)),
                 interior_block.map(|_| (self.interior_scratch(), &pr.d_interior)),
             ];
@@ -1460,6 +1513,7 @@ impl<'a> Window<'a> {
         let nc = self.n_cam();
         let rig_block = self.rig_block();
         self.build(lambda);
+        self.hold_blocks();
         for i in 0..nc {
             self.reduced[i * nc + i] *= 1.0 + lambda;
         }
@@ -1658,11 +1712,14 @@ impl<'a> Window<'a> {
             count += 6;
             cost += self.block_prior(normal, e, &r, &ep.prior_info);
         }
+        // A held calibration is no unknown and its priors no equations: the global
+        // test and its degrees of freedom are those of the fixed calibration.
+        let counted = !self.calibration_held as usize;
         if let Some(rb) = self.rig_block() {
             let r = prior_residual(&self.rig.to_array(), &self.rig_prior.to_array());
             let info = self.rig_prior_info;
             cost += self.block_prior(normal, rb, &r, &info);
-            count += 6;
+            count += 6 * counted;
             if s.base_length_m > 0.0 {
                 let (e, g) = base_length(&self.rig.base, self.nominal_base);
                 let w = 1.0 / (s.base_length_m * s.base_length_m);
@@ -1672,14 +1729,14 @@ impl<'a> Window<'a> {
                     e,
                     w,
                 );
-                count += 1;
+                count += counted;
             }
         }
         if let Some(ib) = self.interior_block() {
             let r = prior_residual(&self.interior, &self.interior_prior);
             let info = self.interior_prior_info;
             cost += self.block_prior(normal, ib, &r, &info);
-            count += 6;
+            count += 6 * counted;
         }
         for e in 0..self.n_epochs {
             let ep = self.epochs[e];
@@ -2200,7 +2257,11 @@ impl<'a> Window<'a> {
     /// Counts, redundancy, sigma0 and the global chi-square test of the current
     /// solution into `report`; returns the variance factor.
     fn global_test(&mut self, report: &mut Report) -> Result<f64, AdjustError> {
-        let nc = self.n_cam();
+        let nc = if self.calibration_held {
+            6 * self.n_epochs
+        } else {
+            self.n_cam()
+        };
         let (obs_cost, behind) = self.cost();
         let (_, n_constraints) = self.add_constraints(false);
         let mut n_obs = 0;
@@ -2266,6 +2327,7 @@ impl<'a> Window<'a> {
         // Undamped reduced matrix, inverted in place: Q_cc.
         self.step_matrix_only()?;
         cholesky::invert_in_place(&mut self.reduced[..nc * nc], nc);
+        self.clear_held_cofactors();
         for e in 0..self.n_epochs {
             let mut cov = [0.0; 36];
             for i in 0..6 {
@@ -2276,7 +2338,7 @@ impl<'a> Window<'a> {
             self.epochs[e].cov = cov;
             self.epochs[e].flags |= EP_COV;
         }
-        if let Some(rb) = rig_block {
+        if let Some(rb) = rig_block.filter(|_| !self.calibration_held) {
             for i in 0..6 {
                 for j in 0..6 {
                     self.rig_cov[i * 6 + j] = self.reduced[(6 * rb + i) * nc + 6 * rb + j];
@@ -2284,7 +2346,7 @@ impl<'a> Window<'a> {
                 self.rig_std[i] = libm::sqrt((s02 * self.rig_cov[i * 6 + i]).max(0.0));
             }
         }
-        if let Some(ib) = self.interior_block() {
+        if let Some(ib) = self.interior_block().filter(|_| !self.calibration_held) {
             for i in 0..6 {
                 for j in 0..6 {
                     self.interior_cov[i * 6 + j] = self.reduced[(6 * ib + i) * nc + 6 * ib + j];
@@ -2292,7 +2354,8 @@ impl<'a> Window<'a> {
                 self.interior_std[i] = libm::sqrt((s02 * self.interior_cov[i * 6 + i]).max(0.0));
             }
         }
-        self.rig_cov_valid = true;
+        // A held calibration has no estimate to carry across the slide.
+        self.rig_cov_valid = !self.calibration_held;
         // Points: Q_pp = V^-1 + V^-1 W^T Q_cc W V^-1.
         for p in 0..self.n_point_slots {
             if self.points[p].flags & (PT_USED | PT_EXCLUDED) != PT_USED {
@@ -2324,11 +2387,99 @@ impl<'a> Window<'a> {
         Ok(())
     }
 
+    /// A held calibration is known, not estimated: its rows and columns of the inverted
+    /// reduced matrix (the unit placeholders of [`Self::hold_blocks`]) add nothing to
+    /// the points' cofactors.
+    fn clear_held_cofactors(&mut self) {
+        if !self.calibration_held {
+            return;
+        }
+        let nc = self.n_cam();
+        for r in 6 * self.n_epochs..nc {
+            for c in 0..nc {
+                self.reduced[r * nc + c] = 0.0;
+                self.reduced[c * nc + r] = 0.0;
+            }
+        }
+    }
+
+    /// The score test of the held calibration at the current solution (call it after
+    /// [`Self::solve`]; `sigma0` is that solution's a-posteriori standard deviation).
+    ///
+    /// Why a score test: it needs no adjustment with the calibration free, so a good
+    /// calibration is never disturbed by its own estimation. At the held solution the
+    /// poses' and points' gradient is zero, so the full system's step `d = N^-1 g` is
+    /// the free adjustment's first step in the calibration and `d_c^T g_c` (the
+    /// calibration's part) is `g_red^T N_red^-1 g_red`, the Schur complement's quadratic
+    /// form: the statistic. The calibration priors are part of `N` and `g`, so a
+    /// correction is weighed against the calibration's stated precision.
+    pub fn calibration_test(&mut self, sigma0: f64) -> Result<CalibrationTest, AdjustError> {
+        let first = 6 * self.n_epochs;
+        let nc = self.n_cam();
+        if !self.calibration_held || nc == first {
+            return Err(AdjustError::InvalidConfig);
+        }
+        self.build_index();
+        self.build(0.0);
+        let mut g = [0.0; 12];
+        g[..nc - first].copy_from_slice(&self.rhs[first..nc]);
+        cholesky::factor(&mut self.reduced[..nc * nc], nc, cholesky::PIVOT_REL_TOL).map_err(
+            |e| AdjustError::Singular {
+                epoch: (e.row / 6).min(self.n_epochs.saturating_sub(1)),
+            },
+        )?;
+        cholesky::solve(&self.reduced[..nc * nc], nc, &mut self.rhs[..nc]);
+        let d = &self.rhs[first..nc];
+        let score: f64 = d.iter().zip(&g).map(|(a, b)| a * b).sum();
+        let s02 = (sigma0 * sigma0).max(1e-300);
+        let mut test = CalibrationTest {
+            statistic: score / s02,
+            dof: nc - first,
+            ..Default::default()
+        };
+        let mut at = first;
+        if self.rig_block().is_some() {
+            test.rig.copy_from_slice(&self.rhs[at..at + 6]);
+            at += 6;
+        }
+        if self.interior_block().is_some() {
+            test.interior.copy_from_slice(&self.rhs[at..at + 6]);
+        }
+        Ok(test)
+    }
+
+    /// Applies the correction of a [`CalibrationTest`] to the held calibration; the
+    /// next [`Self::solve`] adjusts the poses and points to it.
+    pub fn correct_calibration(&mut self, test: &CalibrationTest) {
+        let mut r = self.rig.to_array();
+        for (ri, d) in r.iter_mut().zip(test.rig) {
+            *ri += d;
+        }
+        self.rig = RigParams::from_array(&r);
+        for (i, d) in self.interior.iter_mut().zip(test.interior) {
+            *i += d;
+        }
+    }
+
+    /// Takes the rig and interior blocks out of the adjustment for good, keeping their
+    /// values: the calibration was tested long enough and needs no correction, and
+    /// each solve saves their partial derivatives.
+    pub fn drop_calibration(&mut self) {
+        self.calibration_active = false;
+        self.rig_cov_valid = false;
+    }
+
+    /// Whether the rig and interior blocks still take part (held or free).
+    pub fn calibration_active(&self) -> bool {
+        self.calibration_active && (self.cfg.estimate_rig || self.cfg.self_calibration.is_some())
+    }
+
     /// Builds the undamped reduced matrix and factors it (for the covariance).
     fn step_matrix_only(&mut self) -> Result<(), AdjustError> {
         // The matrix of an undamped step, without the step.
         let nc = self.n_cam();
         self.build(0.0);
+        self.hold_blocks();
         let res = cholesky::factor(&mut self.reduced[..nc * nc], nc, cholesky::PIVOT_REL_TOL)
             .map_err(|e| e.row / 6);
         res.map_err(|slot| {
