@@ -94,6 +94,15 @@ pub fn traverse_config(c: &Configure) -> Result<TraverseConfig, BuildError> {
     // The mode's own settings (seed window lengths included) come last, then the
     // capacities that follow from the window.
     // A seed mode's window length wins over the rig estimation's minimum.
+    if !t.calibration_precision.valid() {
+        return Err(BuildError::Invalid(
+            "calibration precision must be positive",
+        ));
+    }
+    let mut cfg = cfg.with_calibration_precision(t.calibration_precision);
+    if !t.check_calibration {
+        cfg = cfg.with_calibration_check(None);
+    }
     let mut cfg = cfg.with_rig_estimation(t.estimate_rig).with_mode(t.mode);
     cfg.fit_capacities();
     Ok(cfg)
@@ -195,7 +204,11 @@ impl EpochProcessor for TraverseProcessor<'_> {
             out.new_points as f64,
             out.redundancy as f64,
         ];
-        if self.traverse.config().adjust.estimate_rig {
+        // The rig as the adjustment has it, when it can differ from the calibration:
+        // estimated freely, or corrected by the calibration check.
+        let cfg = self.traverse.config();
+        let free = cfg.adjust.estimate_rig && cfg.calibration_check.is_none();
+        if free || self.traverse.calibration_corrections() > 0 {
             let (rig, std) = self.traverse.rig_estimate();
             result.rig = Some(RigEstimate {
                 params: rig.to_array().map(|v| v as f32),
@@ -337,7 +350,7 @@ mod tests {
     use phototraverse_core::adjust::Robust;
     use phototraverse_core::camera::{Interior, Rig};
     use phototraverse_core::protocol::messages::{
-        Pipeline, Repr, TraverseMode, TraverseSettings, CONFIG_VERSION,
+        CalibrationPrecision, Pipeline, Repr, TraverseMode, TraverseSettings, CONFIG_VERSION,
     };
 
     fn configure(traverse: TraverseSettings) -> Configure {
@@ -359,7 +372,9 @@ mod tests {
     fn configure_v2_fields_reach_the_traverse_config() {
         let d = traverse_config(&configure(TraverseSettings::default())).unwrap();
         assert_eq!(d.adjust.window, 8);
-        assert!(!d.adjust.estimate_rig);
+        // The calibration check: rig and interior blocks held at the calibration.
+        assert!(d.calibration_check.is_some() && d.adjust.hold_calibration);
+        assert!(d.adjust.estimate_rig && d.adjust.self_calibration.is_some());
         assert_eq!(d.datum, Pose::from_degrees(90.0, 0.0, 0.0, [0.0; 3]));
         assert_eq!(d.sigma_px, 0.5);
         let t = TraverseSettings {
@@ -367,11 +382,38 @@ mod tests {
             estimate_rig: true,
             sigma_px: 0.3,
             datum: [1.5, 0.01, 0.02, 5.0, 6.0, 1.2],
+            ..TraverseSettings::default()
         };
         let c = traverse_config(&configure(t)).unwrap();
         assert_eq!(c.adjust.window, 2);
         assert!(matches!(c.adjust.robust, Robust::SeedReweight { .. }));
-        assert!(c.adjust.estimate_rig);
+        // Free estimation replaces the check.
+        assert!(c.adjust.estimate_rig && !c.adjust.hold_calibration);
+        assert!(c.calibration_check.is_none());
+        // v4: the stated precision becomes the prior; the hold flag ends the check.
+        let precision = CalibrationPrecision {
+            principal_point_px: 0.5,
+            focal: 0.002,
+            angles_rad: 2e-4,
+            base_m: 5e-4,
+        };
+        let p = traverse_config(&configure(TraverseSettings {
+            calibration_precision: precision,
+            ..TraverseSettings::default()
+        }))
+        .unwrap();
+        assert_eq!(p.adjust.sigmas.rig_angle_rad, 2e-4);
+        assert_eq!(p.adjust.sigmas.rig_base_m, 5e-4);
+        let focal = p.rig.right.focal_mm;
+        let sc = p.adjust.self_calibration.unwrap();
+        assert!((sc.focal_mm[1] - 0.002 * focal).abs() < 1e-15);
+        let held = traverse_config(&configure(TraverseSettings {
+            check_calibration: false,
+            ..TraverseSettings::default()
+        }))
+        .unwrap();
+        assert!(held.calibration_check.is_none() && !held.adjust.estimate_rig);
+        assert!(held.adjust.self_calibration.is_none());
         assert_eq!(c.sigma_px, 0.3);
         assert_eq!(c.datum.to_params(), t.datum);
         let s = traverse_config(&configure(TraverseSettings {

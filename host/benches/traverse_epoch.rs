@@ -12,7 +12,7 @@
 //! `--help`; `poses=FILE` writes the estimated KITTI poses); without them it runs the firmware's defaults for the dataset's rig.
 use phototraverse_core::budget::{Arena, MemoryBudget};
 use phototraverse_core::camera::kitti_from_pose;
-use phototraverse_core::traverse::{flags, Clock, Traverse, TraverseConfig};
+use phototraverse_core::traverse::{flags, CalibrationCheck, Clock, Traverse, TraverseConfig};
 use phototraverse_host::dataset::Dataset;
 use phototraverse_host::eval::evaluate;
 use std::path::PathBuf;
@@ -114,6 +114,9 @@ const SETTERS: &[(&str, Setter)] = &[
     }),
     ("anchor_scale", |c, v| c.max_anchor_scale = v as f32),
     ("estimate_rig", |c, v| *c = c.with_rig_estimation(v != 0.0)),
+    ("check_calibration", |c, v| {
+        *c = c.with_calibration_check((v != 0.0).then(CalibrationCheck::default))
+    }),
     ("desc_grid", |c, v| c.sift.descriptor_grid = v as usize),
     ("ori_radius", |c, v| c.sift.orientation_radius = v as f32),
     ("ori_stride", |c, v| {

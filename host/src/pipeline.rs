@@ -3,7 +3,7 @@
 use anyhow::{Context, Result};
 use phototraverse_core::camera::{Pose, Rig};
 use phototraverse_core::protocol::messages::{
-    Configure, Pipeline, TraverseMode, TraverseSettings, CONFIG_VERSION,
+    CalibrationPrecision, Configure, Pipeline, TraverseMode, TraverseSettings, CONFIG_VERSION,
 };
 use phototraverse_core::traverse::config::{
     TRAVERSE_CONTRAST, TRAVERSE_FIXED_EPOCHS, TRAVERSE_OCTAVES, TRAVERSE_WINDOW,
@@ -74,7 +74,8 @@ impl DatumSettings {
 /// track_capacity = 600         # tracks kept at once
 /// fixed_epochs = 8             # epochs that left the window whose observations still count
 /// mode = "window"              # window, seed2014, seed2006
-/// estimate_rig = false         # estimate the relative orientation
+/// estimate_rig = false         # estimate the rig and the right camera's interior freely
+/// check_calibration = true     # test the calibration, correct it where the images call for it
 /// sigma_px = 0.5               # a-priori image sigma, pixels
 /// # [datum] omega_deg, phi_deg, kappa_deg, position_m (default: the dataset's)
 /// ```
@@ -96,6 +97,8 @@ pub struct PipelineSettings {
     pub fixed_epochs: u16,
     pub mode: Mode,
     pub estimate_rig: bool,
+    /// The calibration check (default on; `false` holds the calibration as given).
+    pub check_calibration: bool,
     pub sigma_px: f64,
     /// `None`: the dataset's datum (rig.toml `[datum]`, else omega 90 at the origin).
     pub datum: Option<DatumSettings>,
@@ -117,6 +120,7 @@ impl Default for PipelineSettings {
             fixed_epochs: TRAVERSE_FIXED_EPOCHS as u16,
             mode: Mode::Window,
             estimate_rig: false,
+            check_calibration: true,
             sigma_px: 0.5,
             datum: None,
         }
@@ -173,14 +177,24 @@ impl PipelineSettings {
         Ok(())
     }
 
-    /// The configuration message for `rig` (datum: the settings' or omega 90 at the origin).
+    /// The configuration message for `rig` (datum: the settings' or omega 90 at the
+    /// origin; the calibration's precision unstated).
     pub fn configure(&self, rig: &Rig) -> Configure {
-        self.configure_for(rig, &crate::dataset::default_datum())
+        self.configure_for(
+            rig,
+            &crate::dataset::default_datum(),
+            &CalibrationPrecision::UNSTATED,
+        )
     }
 
-    /// The configuration message for a dataset's rig and datum (the settings'
-    /// `[datum]`, when given, wins over `dataset_datum`).
-    pub fn configure_for(&self, rig: &Rig, dataset_datum: &Pose) -> Configure {
+    /// The configuration message for a dataset's rig, datum and calibration precision
+    /// (the settings' `[datum]`, when given, wins over `dataset_datum`).
+    pub fn configure_for(
+        &self,
+        rig: &Rig,
+        dataset_datum: &Pose,
+        precision: &CalibrationPrecision,
+    ) -> Configure {
         let (w, h) = (rig.left.width_px, rig.left.height_px);
         let datum = self.datum.map_or(*dataset_datum, |d| d.pose());
         Configure {
@@ -190,6 +204,8 @@ impl PipelineSettings {
                 estimate_rig: self.estimate_rig,
                 sigma_px: self.sigma_px,
                 datum: datum.to_params(),
+                check_calibration: self.check_calibration,
+                calibration_precision: *precision,
             },
             rig: *rig,
             pipeline: Pipeline {
@@ -254,7 +270,7 @@ mod tests {
             0.4,
         );
         let dataset = Pose::from_degrees(90.0, 0.0, 0.0, [1.0, 2.0, 3.0]);
-        let c = s.configure_for(&rig, &dataset);
+        let c = s.configure_for(&rig, &dataset, &CalibrationPrecision::UNSTATED);
         assert_eq!(c.version, CONFIG_VERSION);
         assert_eq!(c.pipeline.fixed_epochs, Some(TRAVERSE_FIXED_EPOCHS as u16));
         assert_eq!(c.traverse.mode, TraverseMode::Seed2006);
@@ -264,7 +280,11 @@ mod tests {
         let want = Pose::from_degrees(92.0, 1.0, -2.0, [5.0, 6.0, 1.2]).to_params();
         assert_eq!(c.traverse.datum, want);
         // Without [datum] the dataset's datum goes.
-        let d = PipelineSettings::default().configure_for(&rig, &dataset);
+        let d = PipelineSettings::default().configure_for(
+            &rig,
+            &dataset,
+            &CalibrationPrecision::UNSTATED,
+        );
         assert_eq!(d.traverse.datum, dataset.to_params());
         assert_eq!(d.traverse.mode, TraverseMode::Window);
         assert!(!d.pipeline.fine_octave);

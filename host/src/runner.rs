@@ -58,7 +58,9 @@ pub struct RunOutcome {
 /// Runs `ds` into `out` (created if needed).
 pub fn run_dataset(ds: &Dataset, out: &Path, opts: &RunOptions) -> Result<RunOutcome> {
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let configure = opts.settings.configure_for(&ds.rig, &ds.datum);
+    let configure = opts
+        .settings
+        .configure_for(&ds.rig, &ds.datum, &ds.precision);
     let transport = opts
         .link
         .open()
@@ -377,7 +379,9 @@ impl<'d> Run<'d> {
     fn memory_lines(&self, high_water: Option<u32>) -> Vec<MemoryLine> {
         // The firmware's own prediction: frames and traverse components.
         let mut budget = MemoryBudget::new();
-        let configure = self.settings.configure_for(&self.ds.rig, &self.ds.datum);
+        let configure =
+            self.settings
+                .configure_for(&self.ds.rig, &self.ds.datum, &self.ds.precision);
         let _ = configuration_budget(&TraverseFactory, &configure, &mut budget);
         let kind = |k: ComponentKind| format!("{k:?}").to_lowercase();
         let mut lines: Vec<MemoryLine> = budget
@@ -466,6 +470,7 @@ fn flag_note(f: u32) -> Option<String> {
         (flags::BAD_IMAGE, "image refused"),
         (flags::CAPACITY, "capacity reached"),
         (flags::RELOCALIZED, "relocalized"),
+        (flags::CALIBRATION_CORRECTED, "calibration corrected"),
     ];
     let words: Vec<&str> = names
         .iter()

@@ -27,6 +27,33 @@ fn number(v: &serde_json::Value, key: &str) -> f64 {
         .unwrap_or_else(|| panic!("{key} missing in {v}"))
 }
 
+/// Runs `ds` through the in-process firmware (with `args` besides) into `out`; its
+/// translation drift (%), rotation drift (deg/m) and the epochs whose calibration
+/// the check corrected.
+fn run_and_evaluate(ds: &Path, out: &Path, args: &[&str]) -> (f64, f64, usize) {
+    let s = |p: &Path| p.to_str().unwrap().to_owned();
+    let mut run = vec!["run", ds.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    run.extend(["--link", "inproc"]);
+    run.extend(args);
+    ok(&run);
+    let json = out.join("eval.json");
+    ok(&[
+        "eval",
+        &s(&ds.join("gt_poses.txt")),
+        &s(&out.join("poses.txt")),
+        "--json",
+        &s(&json),
+    ]);
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let report = std::fs::read_to_string(out.join("report.json")).unwrap();
+    (
+        number(&v, "translation_drift_pct"),
+        number(&v, "rotation_drift_deg_per_m"),
+        report.matches("calibration corrected").count(),
+    )
+}
+
 #[test]
 fn straight_street_beats_the_old_floor_through_the_firmware() {
     let t = tempfile::tempdir().unwrap();
@@ -42,21 +69,48 @@ fn straight_street_beats_the_old_floor_through_the_firmware() {
         "--out",
         &s(&ds),
     ]);
-    ok(&["run", &s(&ds), "--out", &s(&out), "--link", "inproc"]);
-    let json = t.path().join("eval.json");
-    ok(&[
-        "eval",
-        &s(&ds.join("gt_poses.txt")),
-        &s(&out.join("poses.txt")),
-        "--json",
-        &s(&json),
-    ]);
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
-    let drift = number(&v, "translation_drift_pct");
-    let rot = number(&v, "rotation_drift_deg_per_m");
+    let (drift, rot, corrected) = run_and_evaluate(&ds, &out, &[]);
     assert!(
         drift <= MAX_DRIFT_PCT && rot <= MAX_DEG_PER_M,
         "drift {drift:.4} % (bound {MAX_DRIFT_PCT}), rotation {rot:.5} deg/m (bound {MAX_DEG_PER_M})"
+    );
+    // A perfect calibration passes the calibration check at every epoch.
+    assert_eq!(corrected, 0, "the check corrected a perfect calibration");
+}
+
+/// The calibration errors of the miscalibrated rig: the right camera's and the
+/// left one's focal length 0.3 %, principal points 1 px, the relative rotation
+/// 0.05 deg (the base is exact: images alone cannot tell its length).
+const CALIBRATION_ERROR: &str = "focal=0.003,pp_px=1,rel_deg=0.05";
+/// The default (calibration check) gives 1.25 % on this sequence, the calibration
+/// held as given 4.6 %.
+const MAX_MISCALIBRATED_DRIFT_PCT: f64 = 2.0;
+
+#[test]
+fn a_miscalibrated_rig_is_corrected_by_default() {
+    let t = tempfile::tempdir().unwrap();
+    let ds = t.path().join("ds");
+    let s = |p: &Path| p.to_str().unwrap().to_owned();
+    ok(&[
+        "synth",
+        "--scene",
+        "curves",
+        "--frames",
+        "40",
+        "--calib-error",
+        CALIBRATION_ERROR,
+        "--out",
+        &s(&ds),
+    ]);
+    let (drift, rot, corrected) = run_and_evaluate(&ds, &t.path().join("default"), &[]);
+    let held = t.path().join("held.toml");
+    std::fs::write(&held, "check_calibration = false\n").unwrap();
+    let (held_drift, held_rot, held_corrected) =
+        run_and_evaluate(&ds, &t.path().join("held"), &["--config", &s(&held)]);
+    assert!(corrected >= 1 && held_corrected == 0);
+    assert!(
+        drift <= MAX_MISCALIBRATED_DRIFT_PCT && drift < 0.5 * held_drift && rot < held_rot,
+        "default {drift:.3} % {rot:.4} deg/m; calibration held as given {held_drift:.3} % \
+         {held_rot:.4} deg/m"
     );
 }

@@ -25,7 +25,7 @@ fn run_seed2014_mode_with_the_rig_estimated() {
     ]);
     assert!(stdout.contains("mode seed2014: 4 epochs"), "{stdout}");
     assert!(stdout.contains("chi-square over"), "{stdout}");
-    assert!(stdout.contains("rig estimated"), "{stdout}");
+    assert!(stdout.contains("rig as adjusted"), "{stdout}");
     let text = std::fs::read_to_string(t.path().join("run/report.json")).unwrap();
     let json: serde_json::Value = serde_json::from_str(&text).unwrap();
     assert_eq!(json["mode"], "seed2014");

@@ -4,7 +4,7 @@
 //! `docs/protocol.md`; each struct below lists its fields in wire order.
 use super::packet::EncodeError;
 use crate::camera::{Interior, Rig};
-pub use crate::traverse::TraverseMode;
+pub use crate::traverse::{CalibrationPrecision, TraverseMode};
 
 /// Message type byte of the header.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -300,7 +300,7 @@ repr!(
 
 /// Payload version of [`Configure`] this build writes. Later versions append
 /// fields; a parser reads the fields it knows and ignores the rest.
-pub const CONFIG_VERSION: u16 = 3;
+pub const CONFIG_VERSION: u16 = 4;
 
 /// Pipeline capacities and thresholds, plain numbers the traverse maps to its config.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -362,6 +362,12 @@ pub struct TraverseSettings {
     pub sigma_px: f64,
     /// The datum: the left camera at epoch 0, omega, phi, kappa (rad), X, Y, Z (m).
     pub datum: [f64; 6],
+    /// Test the calibration and correct it where the images call for it (v4 flag;
+    /// `false` holds it as given). A v1-v3 payload gets the check.
+    pub check_calibration: bool,
+    /// The calibration's stated precision (v4; earlier payloads get
+    /// [`CalibrationPrecision::UNSTATED`]).
+    pub calibration_precision: CalibrationPrecision,
 }
 
 impl Default for TraverseSettings {
@@ -373,6 +379,8 @@ impl Default for TraverseSettings {
             estimate_rig: false,
             sigma_px: 0.5,
             datum: [core::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0, 0.0, 0.0],
+            check_calibration: true,
+            calibration_precision: CalibrationPrecision::UNSTATED,
         }
     }
 }
@@ -381,6 +389,9 @@ impl Default for TraverseSettings {
 const CONFIG_ESTIMATE_RIG: u8 = 1;
 /// Bit 1 of the v2 flags byte: the extractor's fine octave ([`Pipeline::fine_octave`]).
 const CONFIG_FINE_OCTAVE: u8 = 2;
+/// Bit 2 of the flags byte (v4): hold the calibration as given, no check
+/// ([`TraverseSettings::check_calibration`] false).
+const CONFIG_HOLD_CALIBRATION: u8 = 4;
 
 /// Host -> firmware: the rig and the pipeline. Answered by ConfigAccepted or Error.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -446,9 +457,10 @@ repr!(
         };
         let mut traverse = TraverseSettings::default();
         let mut pipeline = pipeline;
+        let mut flags = 0;
         if version >= 2 {
             let code = r.u8()?;
-            let flags = r.u8()?;
+            flags = r.u8()?;
             traverse.sigma_px = r.f64()?;
             traverse.datum = r.f64s()?;
             traverse.mode =
@@ -459,6 +471,17 @@ repr!(
         if version >= 3 {
             let f = r.u16()?;
             pipeline.fixed_epochs = (f != FIRMWARE_DEFAULT_U16).then_some(f);
+        }
+        if version >= 4 {
+            traverse.check_calibration = flags & CONFIG_HOLD_CALIBRATION == 0;
+            let p = &mut traverse.calibration_precision;
+            p.principal_point_px = r.f64()?;
+            p.focal = r.f64()?;
+            p.angles_rad = r.f64()?;
+            p.base_m = r.f64()?;
+            if !p.valid() {
+                return Err(ParseError::Invalid("calibration precision"));
+            }
         }
         // Fields of later versions follow; this build ignores them.
         let _ = r.rest();
@@ -498,12 +521,24 @@ repr!(
                 0
             };
             let octave_flag = if p.fine_octave { CONFIG_FINE_OCTAVE } else { 0 };
-            w.u8(rig_flag | octave_flag)?;
+            let hold_flag = if s.version >= 4 && !t.check_calibration {
+                CONFIG_HOLD_CALIBRATION
+            } else {
+                0
+            };
+            w.u8(rig_flag | octave_flag | hold_flag)?;
             w.f64(t.sigma_px)?;
             w.f64s(&t.datum)?;
         }
         if s.version >= 3 {
             w.u16(p.fixed_epochs.unwrap_or(FIRMWARE_DEFAULT_U16))?;
+        }
+        if s.version >= 4 {
+            let c = &s.traverse.calibration_precision;
+            w.f64(c.principal_point_px)?;
+            w.f64(c.focal)?;
+            w.f64(c.angles_rad)?;
+            w.f64(c.base_m)?;
         }
     }
 );

@@ -37,6 +37,7 @@ fn sample_messages(chunk: &[u8]) -> [Message<'_>; 16] {
                 estimate_rig: true,
                 sigma_px: 0.7,
                 datum: [1.5, 0.01, -0.02, 10.0, 20.0, 2.2],
+                ..TraverseSettings::default()
             },
         }),
         Message::ConfigAccepted(ConfigAccepted {
@@ -288,6 +289,7 @@ fn configure_v2_round_trips_and_v1_payloads_get_the_v1_behaviour() {
             estimate_rig: true,
             sigma_px: 0.25,
             datum: [1.6, -0.02, 0.03, 100.0, -50.0, 1.5],
+            ..TraverseSettings::default()
         },
     };
     let mut payload = [0u8; 512];
@@ -357,6 +359,36 @@ fn configure_v2_round_trips_and_v1_payloads_get_the_v1_behaviour() {
     };
     let n3 = firmware_default.emit(&mut payload).unwrap();
     assert_eq!(Configure::parse(&payload[..n3]).unwrap(), firmware_default);
+    // v4 appends the calibration's precision and sets the hold flag; v3 and older
+    // get the check with the unstated precision.
+    assert!(
+        Configure::parse(&payload[..n3])
+            .unwrap()
+            .traverse
+            .check_calibration
+    );
+    let v4 = Configure {
+        version: 4,
+        traverse: TraverseSettings {
+            check_calibration: false,
+            calibration_precision: CalibrationPrecision {
+                principal_point_px: 0.5,
+                focal: 0.002,
+                angles_rad: 2e-4,
+                base_m: 5e-4,
+            },
+            ..v3.traverse
+        },
+        ..v3
+    };
+    let n4 = v4.emit(&mut payload).unwrap();
+    assert_eq!(n4, 335);
+    assert_eq!(Configure::parse(&payload[..n4]).unwrap(), v4);
+    payload[n4 - 8..n4].copy_from_slice(&0f64.to_le_bytes());
+    assert_eq!(
+        Configure::parse(&payload[..n4]),
+        Err(ParseError::Invalid("calibration precision"))
+    );
     assert_eq!(back.traverse, TraverseSettings::default());
     assert_eq!(back.traverse.mode, TraverseMode::Window);
     assert!(!back.traverse.estimate_rig);

@@ -22,10 +22,6 @@ pub const MIN_PENDING: usize = 256;
 /// Epipolar tolerance of the stereo search when the rig is estimated, pixels: the
 /// calibration it starts from may be off by a pixel on each camera.
 pub const RIG_ESTIMATION_TOLERANCE_PX: f32 = 3.0;
-/// Standard deviation of a calibrated principal point, pixels (self-calibration prior).
-pub const CALIBRATION_PP_PX: f64 = 2.0;
-/// Relative standard deviation of a calibrated focal length (self-calibration prior).
-pub const CALIBRATION_FOCAL: f64 = 0.01;
 /// The left (reference) camera's calibration sigmas are these times the right one's:
 /// its interior is held at the calibration (see `TraverseConfig::interior_sigmas`).
 pub const REFERENCE_CAMERA_FACTOR: f64 = 0.01;
@@ -63,6 +59,85 @@ pub struct TraverseConfig {
     /// appears at most this many times larger or smaller; 1 re-takes it at every
     /// epoch (see `traverse::patches`).
     pub max_anchor_scale: f32,
+    /// The calibration's stated precision: the prior of its test and correction.
+    pub calibration_precision: CalibrationPrecision,
+    /// Test the calibration against the observations and correct it where they call
+    /// for it (see [`CalibrationCheck`]); `None` holds the calibration as given (or
+    /// estimates it freely with [`TraverseConfig::with_rig_estimation`]).
+    pub calibration_check: Option<CalibrationCheck>,
+}
+
+/// The calibration check of the default configuration: the rig's relative orientation
+/// and the interior orientation take part in the adjustment held at the calibration,
+/// so a good calibration never moves; after each epoch's adjustment a score test
+/// ([`crate::adjust::Window::calibration_test`]) asks whether freeing them would
+/// lower `vTPv` significantly, and only then the correction it gives is applied.
+/// A calibration that needed no correction in the first `epochs` epochs is held as
+/// given for the rest of the traverse and its blocks leave the adjustment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CalibrationCheck {
+    /// Epochs over which a calibration is tested before it is accepted as it is.
+    pub epochs: u32,
+    /// Significance level of the test (probability of correcting a good calibration
+    /// at one epoch).
+    pub level: f64,
+}
+
+/// Epochs over which the calibration is tested ([`CalibrationCheck::epochs`]).
+pub const CALIBRATION_CHECK_EPOCHS: u32 = 30;
+/// Significance level of the calibration test ([`CalibrationCheck::level`]).
+pub const CALIBRATION_CHECK_LEVEL: f64 = 1e-3;
+
+impl Default for CalibrationCheck {
+    fn default() -> Self {
+        CalibrationCheck {
+            epochs: CALIBRATION_CHECK_EPOCHS,
+            level: CALIBRATION_CHECK_LEVEL,
+        }
+    }
+}
+
+/// The calibration's precision as its maker states it (standard deviations): the
+/// prior of the calibration test and of the rig estimation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CalibrationPrecision {
+    /// Principal point, pixels (each coordinate, each camera).
+    pub principal_point_px: f64,
+    /// Focal length, relative (0.001 is 0.1 %).
+    pub focal: f64,
+    /// Relative angles of the rig, radians.
+    pub angles_rad: f64,
+    /// Base vector components, metres.
+    pub base_m: f64,
+}
+
+impl CalibrationPrecision {
+    /// What a calibration that does not state its precision is taken to have: loose
+    /// enough that a pixel of principal-point error, a few tenths of a percent of focal
+    /// length and a few hundredths of a degree of relative rotation can be corrected.
+    pub const UNSTATED: CalibrationPrecision = CalibrationPrecision {
+        principal_point_px: 2.0,
+        focal: 0.01,
+        angles_rad: 1e-3,
+        base_m: 1e-3,
+    };
+
+    pub fn valid(&self) -> bool {
+        [
+            self.principal_point_px,
+            self.focal,
+            self.angles_rad,
+            self.base_m,
+        ]
+        .iter()
+        .all(|v| *v > 0.0 && v.is_finite())
+    }
+}
+
+impl Default for CalibrationPrecision {
+    fn default() -> Self {
+        Self::UNSTATED
+    }
 }
 
 /// Scale-space octaves of the traverse: four reach keypoints of sigma 25 px at 640x480,
@@ -181,9 +256,11 @@ impl TraverseConfig {
             temporal_refine: true,
             max_area_ties: usize::MAX,
             max_anchor_scale: super::patches::MAX_ANCHOR_SCALE,
+            calibration_precision: CalibrationPrecision::UNSTATED,
+            calibration_check: None,
         };
         cfg.fit_capacities();
-        cfg
+        cfg.with_calibration_check(Some(CalibrationCheck::default()))
     }
 
     /// Derives the capacities that follow from the configured image size, keypoints,
@@ -384,7 +461,9 @@ pub const SEED2014_DATUM_SIGMA: f64 = 1e-3;
 pub const SEED2014_BASE_SIGMA_M: f64 = 1e-3;
 
 impl TraverseConfig {
-    /// Switches the estimation of the rig's relative orientation in the adjustment.
+    /// Switches on the free estimation of the rig's relative orientation and of the
+    /// interior orientation in the adjustment (`off` leaves the configuration as it is:
+    /// the default calibration check stays).
     ///
     /// Estimating the rig needs the vertical parallax the images really show: with
     /// a rectified calibration the matcher would put each right point on its left
@@ -393,33 +472,65 @@ impl TraverseConfig {
     /// (epipolar band of `RIG_ESTIMATION_TOLERANCE_PX`, wide enough for a pixel of
     /// principal-point error on each camera) and the refinement searches both axes.
     pub fn with_rig_estimation(mut self, on: bool) -> Self {
-        self.adjust.estimate_rig = on;
-        self.adjust.self_calibration = on.then(|| self.interior_sigmas());
-        if on {
-            // The rig and interior blocks are shared by the window's epochs: in three
-            // epochs they trade against the poses (singular solves on the realistic
-            // `curves`), in eight they do not.
-            if self.adjust.window < RIG_ESTIMATION_WINDOW {
-                self.adjust.window = RIG_ESTIMATION_WINDOW;
-                self.matching.track_history = RIG_ESTIMATION_WINDOW;
-                self.fit_capacities();
-            }
-            self.matching.stereo = StereoGeometry::Rig {
-                rig: self.rig,
-                tolerance_px: RIG_ESTIMATION_TOLERANCE_PX,
-                min_depth_m: 1.0,
-                max_depth_m: f64::INFINITY,
-            };
-            if let Some(r) = &mut self.matching.refine {
-                r.rows_only = false;
-            }
+        if !on {
+            return self;
+        }
+        self.calibration_check = None;
+        self.adjust.estimate_rig = true;
+        self.adjust.hold_calibration = false;
+        self.adjust.self_calibration = Some(self.interior_sigmas());
+        // The rig and interior blocks are shared by the window's epochs: in three
+        // epochs they trade against the poses (singular solves on the realistic
+        // `curves`), in eight they do not.
+        if self.adjust.window < RIG_ESTIMATION_WINDOW {
+            self.adjust.window = RIG_ESTIMATION_WINDOW;
+            self.matching.track_history = RIG_ESTIMATION_WINDOW;
+            self.fit_capacities();
+        }
+        self.matching.stereo = StereoGeometry::Rig {
+            rig: self.rig,
+            tolerance_px: RIG_ESTIMATION_TOLERANCE_PX,
+            min_depth_m: 1.0,
+            max_depth_m: f64::INFINITY,
+        };
+        if let Some(r) = &mut self.matching.refine {
+            r.rows_only = false;
         }
         self
     }
 
-    /// Calibration sigmas of the self-calibration that goes with the rig estimation:
-    /// [`CALIBRATION_PP_PX`] pixels for the principal points, [`CALIBRATION_FOCAL`] of the
-    /// focal lengths; the left camera's times [`REFERENCE_CAMERA_FACTOR`].
+    /// Sets the calibration check ([`CalibrationCheck`]; `None` holds the calibration
+    /// as given). The matching is left as it is: the check corrects what the
+    /// observations show, and the free estimation ([`Self::with_rig_estimation`])
+    /// replaces it.
+    pub fn with_calibration_check(mut self, check: Option<CalibrationCheck>) -> Self {
+        if self.calibration_check.is_none() && self.adjust.estimate_rig {
+            // Free estimation: nothing to check.
+            return self;
+        }
+        self.calibration_check = check;
+        let on = check.is_some();
+        self.adjust.estimate_rig = on;
+        self.adjust.hold_calibration = on;
+        self.adjust.self_calibration = on.then(|| self.interior_sigmas());
+        self
+    }
+
+    /// Sets the calibration's stated precision (the prior of the check and of the free
+    /// estimation).
+    pub fn with_calibration_precision(mut self, p: CalibrationPrecision) -> Self {
+        self.calibration_precision = p;
+        self.adjust.sigmas.rig_angle_rad = p.angles_rad;
+        self.adjust.sigmas.rig_base_m = p.base_m;
+        if self.adjust.self_calibration.is_some() {
+            self.adjust.self_calibration = Some(self.interior_sigmas());
+        }
+        self
+    }
+
+    /// Calibration sigmas of the self-calibration that goes with the rig estimation
+    /// and the check: the stated precision, the left camera's times
+    /// [`REFERENCE_CAMERA_FACTOR`].
     ///
     /// Why the left camera is held: it is the reference of the traverse. Its principal
     /// point trades against the attitude of every epoch (only the datum's fixed first
@@ -432,15 +543,13 @@ impl TraverseConfig {
     fn interior_sigmas(&self) -> InteriorSigmas {
         let (l, r) = (&self.rig.left, &self.rig.right);
         let k = REFERENCE_CAMERA_FACTOR;
+        let p = &self.calibration_precision;
         InteriorSigmas {
             principal_point_mm: [
-                k * CALIBRATION_PP_PX * l.pixel_size_mm[0],
-                CALIBRATION_PP_PX * r.pixel_size_mm[0],
+                k * p.principal_point_px * l.pixel_size_mm[0],
+                p.principal_point_px * r.pixel_size_mm[0],
             ],
-            focal_mm: [
-                k * CALIBRATION_FOCAL * l.focal_mm,
-                CALIBRATION_FOCAL * r.focal_mm,
-            ],
+            focal_mm: [k * p.focal * l.focal_mm, p.focal * r.focal_mm],
         }
     }
 
@@ -458,12 +567,16 @@ impl TraverseConfig {
     /// replaces the longer one [`TraverseConfig::with_rig_estimation`] sets, so apply
     /// the mode after it.
     pub fn with_mode(mut self, mode: TraverseMode) -> Self {
-        let a = &mut self.adjust;
-        match mode {
-            TraverseMode::Window => return self,
-            // The seeds' procedures drop a leaving epoch's observations with it.
-            TraverseMode::Seed2014 | TraverseMode::Seed2006 => a.fixed_epochs = 0,
+        if mode == TraverseMode::Window {
+            return self;
         }
+        // The seeds' procedures drop a leaving epoch's observations with it and hold
+        // the calibration as given (unless it is estimated freely).
+        self.adjust.fixed_epochs = 0;
+        if self.calibration_check.is_some() {
+            self = self.with_calibration_check(None);
+        }
+        let a = &mut self.adjust;
         match mode {
             TraverseMode::Window => {}
             TraverseMode::Seed2014 => {
@@ -524,7 +637,9 @@ mod mode_tests {
         assert_eq!(c.adjust.sigmas.datum_position_m.powi(2), 1e-6);
         // Capacities and the rest untouched.
         assert_eq!(c.adjust.max_points, b.adjust.max_points);
-        assert_eq!(c.adjust.estimate_rig, b.adjust.estimate_rig);
+        // The seeds hold the calibration as given: no check.
+        assert!(b.calibration_check.is_some() && b.adjust.estimate_rig);
+        assert!(c.calibration_check.is_none() && !c.adjust.estimate_rig);
         assert_eq!((c.sift, c.sigma_px), (b.sift, b.sigma_px));
     }
 

@@ -25,10 +25,11 @@ pub mod patches;
 #[cfg(test)]
 mod tests;
 
-pub use config::{TraverseConfig, TraverseMode};
+pub use config::{CalibrationCheck, CalibrationPrecision, TraverseConfig, TraverseMode};
 pub use output::{flags, EpochOutput, EpochStatus, StageTimes};
 
 use crate::adjust::geometry::camera_pose;
+use crate::adjust::quality::chi2_quantile;
 use crate::adjust::{
     intersect, resect, AdjustError, Camera, Correspondence, Observation, Ray, Window,
 };
@@ -177,6 +178,8 @@ pub struct Traverse<'a> {
     last_match: crate::matching::EpochReport,
     /// Why the last failed adjustment failed (diagnostics).
     last_solve_error: Option<AdjustError>,
+    /// Corrections the calibration check applied so far.
+    calibration_corrections: u32,
 }
 
 impl<'a> Traverse<'a> {
@@ -225,6 +228,7 @@ impl<'a> Traverse<'a> {
             prev_window_epoch: None,
             last_match: Default::default(),
             last_solve_error: None,
+            calibration_corrections: 0,
         })
     }
 
@@ -780,7 +784,18 @@ impl<'a> Traverse<'a> {
                 .set_pose_prior(id, prediction, self.cfg.prediction_sigmas);
             result = self.window.solve();
         }
-        let Ok(rep) = result else { return false };
+        let Ok(mut rep) = result else { return false };
+        if self.check_calibration(rep.sigma0) {
+            out.flags |= flags::CALIBRATION_CORRECTED;
+            match self.window.solve() {
+                Ok(r) => rep = r,
+                Err(e) => {
+                    self.last_solve_error = Some(e);
+                    out.flags |= flags::SOLVE_FAILED;
+                    return false;
+                }
+            }
+        }
         let last = self.window.n_epochs() - 1;
         if let Some(pose) = self.window.epoch_pose(last) {
             out.left = pose;
@@ -799,6 +814,37 @@ impl<'a> Traverse<'a> {
             out.flags |= flags::CHI2;
         }
         true
+    }
+
+    /// The calibration check ([`config::CalibrationCheck`]) after an adjustment whose
+    /// a-posteriori sigma is `sigma0`: corrects the held calibration when the score
+    /// test rejects it (returns true: the window must be adjusted again), and accepts
+    /// it for good once it went `epochs` epochs without a correction.
+    fn check_calibration(&mut self, sigma0: f64) -> bool {
+        let Some(check) = self.cfg.calibration_check else {
+            return false;
+        };
+        if !self.window.calibration_active() {
+            return false;
+        }
+        // A test that cannot be computed (a singular system) corrects nothing.
+        if let Ok(test) = self.window.calibration_test(sigma0) {
+            let critical = chi2_quantile(1.0 - check.level, test.dof as f64);
+            if test.statistic > critical {
+                self.window.correct_calibration(&test);
+                self.calibration_corrections += 1;
+                return true;
+            }
+        }
+        if self.calibration_corrections == 0 && self.epochs >= check.epochs {
+            self.window.drop_calibration();
+        }
+        false
+    }
+
+    /// Corrections the calibration check has applied so far.
+    pub fn calibration_corrections(&self) -> u32 {
+        self.calibration_corrections
     }
 
     /// RMS image residual of the window's unflagged observations, pixels.

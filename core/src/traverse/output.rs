@@ -26,6 +26,9 @@ pub mod flags {
     /// Informational: the tie points did not resect the camera; it was found again by a
     /// resection on the previous stereo pair's points matched without the motion prior.
     pub const RELOCALIZED: u32 = 1 << 10;
+    /// Informational: the calibration check found the calibration significantly wrong
+    /// and corrected it (the rig's relative orientation and the interior orientation).
+    pub const CALIBRATION_CORRECTED: u32 = 1 << 11;
 
     /// Flags that make an epoch count as flagged (the informational ones do not).
     pub const FLAGGING: u32 = FEW_TIE_POINTS

@@ -77,7 +77,8 @@ pub fn summary(o: &RunOutcome) -> String {
         let a = g.relative_angles_deg;
         let b = g.base_m;
         s += &format!(
-            "rig estimated: angles [{:.4}, {:.4}, {:.4}] deg (+- [{:.4}, {:.4}, {:.4}]), \
+            "rig as adjusted (estimated, or corrected by the calibration check): angles \
+             [{:.4}, {:.4}, {:.4}] deg (+- [{:.4}, {:.4}, {:.4}]), \
              base [{:.5}, {:.5}, {:.5}] m (+- [{:.5}, {:.5}, {:.5}])\n",
             a[0],
             a[1],

@@ -5,6 +5,13 @@
 //! distortion, base `B = -P1[0][3] / fx` along x.
 use super::DatasetError;
 use phototraverse_core::camera::{Interior, Rig};
+use phototraverse_core::traverse::CalibrationPrecision;
+
+/// The precision a KITTI `calib.txt` is taken to have: it states none, and its
+/// rectification leaves no relative orientation to state, so the unstated values
+/// (wide enough for a pixel of principal point and a few tenths of a percent of focal
+/// length on a rectified rig).
+pub const CALIBRATION_PRECISION: CalibrationPrecision = CalibrationPrecision::UNSTATED;
 use std::path::Path;
 
 /// A 3x4 projection matrix, row-major.

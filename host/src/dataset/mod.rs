@@ -12,10 +12,11 @@ pub mod rigfile;
 
 pub use error::DatasetError;
 pub use image::{image_size, load_gray, to_gray8, GrayImage};
-pub use rigfile::{default_datum, read_rig, rig_toml_text, write_rig};
+pub use rigfile::{default_datum, read_rig, read_rig_file, rig_toml_text, write_rig, RigFile};
 
 use crate::poses::{read_poses, KittiPose};
 use phototraverse_core::camera::{Pose, Rig};
+use phototraverse_core::traverse::CalibrationPrecision;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -58,6 +59,9 @@ pub struct Dataset {
     pub rig: Rig,
     /// The datum: the left camera at epoch 0 (rig.toml `[datum]`, default omega 90 deg).
     pub datum: Pose,
+    /// The calibration's stated precision (rig.toml `[precision]`; KITTI:
+    /// [`kitti::CALIBRATION_PRECISION`]).
+    pub precision: CalibrationPrecision,
     /// Epochs in order.
     pub epochs: Vec<Epoch>,
     /// Ground truth (`gt_poses.txt`), one pose per epoch.
@@ -95,11 +99,17 @@ impl Dataset {
         let reference = format!("size of {}", first.1.display());
         check_sizes(&pairs, (w, h), (w, h), &reference)?;
         let rig = kitti::rig_from_calib(&p0, &p1, w, h, &calib_path)?;
-        Self::finish(dir, Layout::Kitti, rig, default_datum(), pairs)
+        let file = RigFile {
+            rig,
+            datum: default_datum(),
+            precision: kitti::CALIBRATION_PRECISION,
+        };
+        Self::finish(dir, Layout::Kitti, file, pairs)
     }
 
     fn open_rig(dir: &Path) -> Result<Dataset, DatasetError> {
-        let (rig, datum) = read_rig(&dir.join("rig.toml"))?;
+        let file = read_rig_file(&dir.join("rig.toml"))?;
+        let rig = file.rig;
         let (left_dir, right_dir) = (dir.join("left"), dir.join("right"));
         let pairs = if left_dir.is_dir() || right_dir.is_dir() {
             pair_images(
@@ -123,14 +133,13 @@ impl Dataset {
         }
         let size = |c: &phototraverse_core::camera::Interior| (c.width_px, c.height_px);
         check_sizes(&pairs, size(&rig.left), size(&rig.right), "rig.toml")?;
-        Self::finish(dir, Layout::Rig, rig, datum, pairs)
+        Self::finish(dir, Layout::Rig, file, pairs)
     }
 
     fn finish(
         dir: &Path,
         layout: Layout,
-        rig: Rig,
-        datum: Pose,
+        file: RigFile,
         pairs: Vec<(String, PathBuf, PathBuf)>,
     ) -> Result<Dataset, DatasetError> {
         let times_path = dir.join(TIMES_FILE);
@@ -166,8 +175,9 @@ impl Dataset {
         Ok(Dataset {
             dir: dir.to_path_buf(),
             layout,
-            rig,
-            datum,
+            rig: file.rig,
+            datum: file.datum,
+            precision: file.precision,
             epochs,
             ground_truth,
         })

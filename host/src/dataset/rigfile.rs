@@ -2,6 +2,7 @@
 //! reading with clear errors and writing.
 use super::DatasetError;
 use phototraverse_core::camera::{Interior, Pose, Rig};
+use phototraverse_core::traverse::CalibrationPrecision;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -35,6 +36,30 @@ struct DatumToml {
     position_m: [f64; 3],
 }
 
+/// `[precision]`: the calibration's standard deviations; a key left out keeps the
+/// unstated value ([`CalibrationPrecision::UNSTATED`]).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+struct PrecisionToml {
+    principal_point_px: f64,
+    /// Relative: 0.001 is 0.1 % of the focal length.
+    focal_relative: f64,
+    angles_deg: f64,
+    base_mm: f64,
+}
+
+impl Default for PrecisionToml {
+    fn default() -> Self {
+        let u = CalibrationPrecision::UNSTATED;
+        PrecisionToml {
+            principal_point_px: u.principal_point_px,
+            focal_relative: u.focal,
+            angles_deg: u.angles_rad.to_degrees(),
+            base_mm: u.base_m * 1e3,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RigToml {
@@ -43,6 +68,16 @@ struct RigToml {
     right_from_left: RelativeToml,
     #[serde(skip_serializing_if = "Option::is_none")]
     datum: Option<DatumToml>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    precision: Option<PrecisionToml>,
+}
+
+/// What `rig.toml` states: the rig, the datum and the calibration's precision.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RigFile {
+    pub rig: Rig,
+    pub datum: Pose,
+    pub precision: CalibrationPrecision,
 }
 
 /// The default datum: a level camera looking along +Y at the origin.
@@ -101,6 +136,11 @@ fn camera_to(c: &Interior) -> CameraToml {
 
 /// Parses rig.toml text; `path` names the file in errors.
 pub fn parse_rig(text: &str, path: &Path) -> Result<(Rig, Pose), DatasetError> {
+    parse_rig_file(text, path).map(|f| (f.rig, f.datum))
+}
+
+/// Parses rig.toml text, the calibration's precision included.
+pub fn parse_rig_file(text: &str, path: &Path) -> Result<RigFile, DatasetError> {
     let file: RigToml = toml::from_str(text).map_err(|e| DatasetError::RigFile {
         path: path.to_path_buf(),
         // toml's message names the missing or bad key and its table, e.g.
@@ -152,16 +192,43 @@ pub fn parse_rig(text: &str, path: &Path) -> Result<(Rig, Pose), DatasetError> {
             pose
         }
     };
-    Ok((rig, datum))
+    let precision = match &file.precision {
+        None => CalibrationPrecision::UNSTATED,
+        Some(p) => {
+            let c = CalibrationPrecision {
+                principal_point_px: p.principal_point_px,
+                focal: p.focal_relative,
+                angles_rad: p.angles_deg.to_radians(),
+                base_m: p.base_mm * 1e-3,
+            };
+            if !c.valid() {
+                return Err(DatasetError::RigFile {
+                    path: path.to_path_buf(),
+                    problem: "precision: every value must be positive and finite".into(),
+                });
+            }
+            c
+        }
+    };
+    Ok(RigFile {
+        rig,
+        datum,
+        precision,
+    })
 }
 
 /// Reads `rig.toml`.
 pub fn read_rig(path: &Path) -> Result<(Rig, Pose), DatasetError> {
+    read_rig_file(path).map(|f| (f.rig, f.datum))
+}
+
+/// Reads `rig.toml`, the calibration's precision included.
+pub fn read_rig_file(path: &Path) -> Result<RigFile, DatasetError> {
     let text = std::fs::read_to_string(path).map_err(|source| DatasetError::Io {
         path: path.to_path_buf(),
         source,
     })?;
-    parse_rig(&text, path)
+    parse_rig_file(&text, path)
 }
 
 /// rig.toml text of a rig and datum (full precision, read back exactly up to
@@ -187,6 +254,7 @@ pub fn rig_toml_text(rig: &Rig, datum: &Pose) -> String {
             kappa_deg: datum.kappa.to_degrees(),
             position_m: datum.centre,
         }),
+        precision: None,
     };
     let body = toml::to_string(&file).unwrap_or_default();
     format!("# phototraverse rig file (DESIGN.md, Dataset layouts)\n{body}")
@@ -250,6 +318,30 @@ base_mm = [400.0, 0.0, 0.0]
             assert!((back.base_m[i] - rig.base_m[i]).abs() < 1e-15);
         }
         assert!((d.omega - datum.omega).abs() < 1e-15 && d.centre == datum.centre);
+    }
+
+    #[test]
+    fn precision_is_read_per_key_with_the_unstated_values_for_the_rest() {
+        let f = parse_rig_file(SEED_RIG, Path::new("rig.toml")).unwrap();
+        assert_eq!(f.precision, CalibrationPrecision::UNSTATED);
+        let text = format!("{SEED_RIG}[precision]\nprincipal_point_px = 0.3\nangles_deg = 0.01\n");
+        let p = parse_rig_file(&text, Path::new("rig.toml"))
+            .unwrap()
+            .precision;
+        assert_eq!(p.principal_point_px, 0.3);
+        assert!((p.angles_rad - 0.01f64.to_radians()).abs() < 1e-18);
+        assert_eq!(p.focal, CalibrationPrecision::UNSTATED.focal);
+        assert!((p.base_m - CalibrationPrecision::UNSTATED.base_m).abs() < 1e-18);
+        let bad = format!("{SEED_RIG}[precision]\nfocal_relative = -0.001\n");
+        let e = parse_rig_file(&bad, Path::new("r/rig.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("r/rig.toml") && e.contains("precision"), "{e}");
+        let unknown = format!("{SEED_RIG}[precision]\nfocal_pct = 0.1\n");
+        let e = parse_rig_file(&unknown, Path::new("rig.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("focal_pct"), "{e}");
     }
 
     #[test]

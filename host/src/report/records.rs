@@ -143,7 +143,9 @@ pub struct RunReport {
     pub evaluation: Option<serde_json::Value>,
     /// Link statistics (bytes, retransmissions, errors).
     pub link: Option<serde_json::Value>,
-    /// The rig as estimated by the adjustment (`--estimate-rig`), at the last epoch.
+    /// The rig as the adjustment had it at the last epoch, when it differs from the
+    /// calibration: estimated (`--estimate-rig`, with standard deviations) or corrected
+    /// by the calibration check (standard deviations zero).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rig: Option<RigReport>,
     /// sigma0 and the chi-square tests over all adjusted epochs.
