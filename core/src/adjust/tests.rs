@@ -1444,6 +1444,8 @@ struct HeldRun {
     poses: Vec<Pose>,
     /// Test statistic before and after the correction (0 when not tested).
     statistic: [f64; 2],
+    /// RMS displacement of the newest epoch's observations by the first correction, px.
+    effect_px: f64,
     dof: usize,
     /// RMS error of the points against the truth, metres.
     rms: f64,
@@ -1483,10 +1485,12 @@ fn held_run(s: &Scene, start: &Rig, hold: bool, correct: bool) -> HeldRun {
     let mut r = w.solve().unwrap();
     let mut statistic = [0.0; 2];
     let mut dof = 0;
+    let mut effect_px = 0.0;
     if hold {
         let t = w.calibration_test(r.sigma0).unwrap();
         statistic[0] = t.statistic;
         dof = t.dof;
+        effect_px = w.correction_effect(&t) / PIXEL_MM;
         if correct {
             w.correct_calibration(&t);
             r = w.solve().unwrap();
@@ -1507,6 +1511,7 @@ fn held_run(s: &Scene, start: &Rig, hold: bool, correct: bool) -> HeldRun {
             .map(|i| w.epoch_pose(i).unwrap())
             .collect(),
         statistic,
+        effect_px,
         dof,
         rms: libm::sqrt(sq / ids.len() as f64),
         rig: w.rig(),
@@ -1533,6 +1538,8 @@ fn a_held_calibration_leaves_the_poses_of_a_fixed_one() {
         "statistic {} >= {critical} on the true calibration",
         held.statistic[0]
     );
+    // What a correction would do to the observations: noise-level (0.3 px noise).
+    assert!(held.effect_px < 0.05, "effect {} px", held.effect_px);
 }
 
 #[test]
@@ -1552,6 +1559,13 @@ fn a_wrong_calibration_fails_the_test_and_its_correction_recovers_the_points() {
         held.statistic[0] > 10.0 * critical,
         "statistic {} against {critical}",
         held.statistic[0]
+    );
+    // Its correction moves the observations by about the error it removes (a pixel of
+    // principal point, 0.6 % of focal length, 0.05 deg: between 1 and 3 px).
+    assert!(
+        held.effect_px > 1.0 && held.effect_px < 3.0,
+        "effect {} px",
+        held.effect_px
     );
     // One correction takes the calibration to where the test passes...
     assert!(

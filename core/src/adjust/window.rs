@@ -2448,6 +2448,58 @@ impl<'a> Window<'a> {
         Ok(test)
     }
 
+    /// How far the correction of `test` would move the observations of the window's
+    /// newest epoch: the RMS displacement (mm, both cameras) of their projections
+    /// with the corrected calibration against the held one. A correction the test
+    /// finds significant may still be too small to matter: hundreds of points make a
+    /// hundredth of a pixel of systematic matching error significant.
+    pub fn correction_effect(&mut self, test: &CalibrationTest) -> f64 {
+        let Some(last) = self.n_epochs.checked_sub(1) else {
+            return 0.0;
+        };
+        self.refresh_rotations();
+        let mut rig = self.rig.to_array();
+        for (r, d) in rig.iter_mut().zip(test.rig) {
+            *r += d;
+        }
+        let rig = RigParams::from_array(&rig);
+        let rig_rot = Rotations::new(rig.angles[0], rig.angles[1], rig.angles[2]);
+        let mut interior = self.interior;
+        for (i, d) in interior.iter_mut().zip(test.interior) {
+            *i += d;
+        }
+        let id = self.epochs[last].id;
+        let (rot, c) = self.pose_parts(At::Window(last));
+        let (mut sum, mut n) = (0.0, 0usize);
+        for o in &self.obs[..self.n_obs] {
+            let pt = &self.points[o.point as usize];
+            if o.epoch != id || !(o.factor > 0.0) || pt.flags & PT_USED == 0 {
+                continue;
+            }
+            let cam = if o.camera == 0 {
+                Camera::Left
+            } else {
+                Camera::Right
+            };
+            let project = |rig: &RigParams, rig_rot: &Rotations, interior: &InteriorCorrections| {
+                let f = corrected_focal(self.focal, cam, interior);
+                project_xy(&rot, &c, rig_rot, &rig.base, cam, f, &pt.xyz)
+                    .map(|xy| shift_principal_point(xy, cam, interior))
+            };
+            let before = project(&self.rig, &self.rig_rot, &self.interior);
+            let after = project(&rig, &rig_rot, &interior);
+            if let (Some(a), Some(b)) = (before, after) {
+                sum += (a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]);
+                n += 1;
+            }
+        }
+        if n == 0 {
+            0.0
+        } else {
+            libm::sqrt(sum / n as f64)
+        }
+    }
+
     /// Applies the correction of a [`CalibrationTest`] to the held calibration; the
     /// next [`Self::solve`] adjusts the poses and points to it.
     pub fn correct_calibration(&mut self, test: &CalibrationTest) {

@@ -81,18 +81,34 @@ pub struct CalibrationCheck {
     /// Significance level of the test (probability of correcting a good calibration
     /// at one epoch).
     pub level: f64,
+    /// Smallest correction applied: the RMS displacement (pixels) it causes on the
+    /// newest epoch's observations ([`crate::adjust::Window::correction_effect`]).
+    pub min_effect_px: f64,
+    /// Consecutive epochs that must reject the calibration before it is corrected: a
+    /// wrong calibration is rejected at every epoch, a right one only now and then.
+    pub persistence: u32,
 }
 
 /// Epochs over which the calibration is tested ([`CalibrationCheck::epochs`]).
 pub const CALIBRATION_CHECK_EPOCHS: u32 = 30;
 /// Significance level of the calibration test ([`CalibrationCheck::level`]).
 pub const CALIBRATION_CHECK_LEVEL: f64 = 1e-3;
+/// Smallest correction the calibration check applies ([`CalibrationCheck::min_effect_px`]).
+pub const CALIBRATION_MIN_EFFECT_PX: f64 = 0.2;
+/// Consecutive rejections before a correction ([`CalibrationCheck::persistence`]).
+pub const CALIBRATION_PERSISTENCE: u32 = 2;
+/// Most correction steps at one epoch (see `Traverse::solve`).
+pub const CALIBRATION_STEPS: usize = 3;
+/// Smallest a-posteriori sigma0 the calibration test divides by.
+pub const CALIBRATION_TEST_MIN_SIGMA0: f64 = 0.05;
 
 impl Default for CalibrationCheck {
     fn default() -> Self {
         CalibrationCheck {
             epochs: CALIBRATION_CHECK_EPOCHS,
             level: CALIBRATION_CHECK_LEVEL,
+            min_effect_px: CALIBRATION_MIN_EFFECT_PX,
+            persistence: CALIBRATION_PERSISTENCE,
         }
     }
 }
