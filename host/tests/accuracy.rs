@@ -27,6 +27,13 @@ fn number(v: &serde_json::Value, key: &str) -> f64 {
         .unwrap_or_else(|| panic!("{key} missing in {v}"))
 }
 
+/// Renders a sequence (`synth` with `args`) into `ds`.
+fn synthesize(ds: &Path, args: &[&str]) {
+    let mut synth = vec!["synth", "--out", ds.to_str().unwrap()];
+    synth.extend(args);
+    ok(&synth);
+}
+
 /// Runs `ds` through the in-process firmware (with `args` besides) into `out`; its
 /// translation drift (%), rotation drift (deg/m) and the epochs whose calibration
 /// the check corrected.
@@ -58,18 +65,8 @@ fn run_and_evaluate(ds: &Path, out: &Path, args: &[&str]) -> (f64, f64, usize) {
 fn straight_street_beats_the_old_floor_through_the_firmware() {
     let t = tempfile::tempdir().unwrap();
     let ds = t.path().join("ds");
-    let out = t.path().join("out");
-    let s = |p: &Path| p.to_str().unwrap().to_owned();
-    ok(&[
-        "synth",
-        "--scene",
-        "straight",
-        "--frames",
-        FRAMES,
-        "--out",
-        &s(&ds),
-    ]);
-    let (drift, rot, corrected) = run_and_evaluate(&ds, &out, &[]);
+    synthesize(&ds, &["--scene", "straight", "--frames", FRAMES]);
+    let (drift, rot, corrected) = run_and_evaluate(&ds, &t.path().join("out"), &[]);
     assert!(
         drift <= MAX_DRIFT_PCT && rot <= MAX_DEG_PER_M,
         "drift {drift:.4} % (bound {MAX_DRIFT_PCT}), rotation {rot:.5} deg/m (bound {MAX_DEG_PER_M})"
@@ -91,17 +88,11 @@ fn a_miscalibrated_rig_is_corrected_by_default() {
     let t = tempfile::tempdir().unwrap();
     let ds = t.path().join("ds");
     let s = |p: &Path| p.to_str().unwrap().to_owned();
-    ok(&[
-        "synth",
-        "--scene",
-        "curves",
-        "--frames",
-        "40",
-        "--calib-error",
-        CALIBRATION_ERROR,
-        "--out",
-        &s(&ds),
-    ]);
+    let scene = ["--scene", "curves", "--frames", "40"];
+    synthesize(
+        &ds,
+        &[&scene[..], &["--calib-error", CALIBRATION_ERROR]].concat(),
+    );
     let (drift, rot, corrected) = run_and_evaluate(&ds, &t.path().join("default"), &[]);
     let held = t.path().join("held.toml");
     std::fs::write(&held, "check_calibration = false\n").unwrap();

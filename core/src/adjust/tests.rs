@@ -1288,6 +1288,40 @@ fn loose_rig_prior() -> ConstraintSigmas {
     }
 }
 
+/// Every epoch, point and observation of `s` in `w` (the base length held at the
+/// truth's); `right` maps each right observation. The window indices of the points.
+fn fill_whole_scene(w: &mut Window, s: &Scene, right: impl Fn([f64; 2]) -> [f64; 2]) -> Vec<u32> {
+    w.set_base_length(s.rig.base_length());
+    for p in &s.poses {
+        w.add_epoch(p, 0.0).unwrap();
+    }
+    let ids: Vec<u32> = s.points.iter().map(|p| w.add_point(*p).unwrap()).collect();
+    let wt = 1.0 / (SIGMA_MM * SIGMA_MM);
+    for (e, c, p, xy, _) in &s.obs {
+        let (cam, xy) = if *c == 0 {
+            (Camera::Left, *xy)
+        } else {
+            (Camera::Right, right(*xy))
+        };
+        w.add_observation(Observation::new(*e as u32, cam, ids[*p], xy, [wt, wt]))
+            .unwrap();
+    }
+    ids
+}
+
+/// RMS error of the adjusted points `ids` against the truth of `s`, metres.
+fn point_rms(w: &Window, ids: &[u32], s: &Scene) -> f64 {
+    let sq: f64 = ids
+        .iter()
+        .zip(&s.points)
+        .filter_map(|(id, t)| {
+            w.point(*id)
+                .map(|p| (0..3).map(|a| (p[a] - t[a]).powi(2)).sum::<f64>())
+        })
+        .sum();
+    libm::sqrt(sq / ids.len() as f64)
+}
+
 /// A window over the whole scene (`Robust::None`, loose rig prior, base length held),
 /// solved; `right` maps each right observation (a calibration error of that camera).
 fn solve_with_right_error(
@@ -1310,33 +1344,10 @@ fn solve_with_right_error(
     let mut mem = arena_for(&cfg);
     let mut arena = Arena::new(&mut mem);
     let mut w = Window::new(cfg, start, &mut arena).unwrap();
-    w.set_base_length(s.rig.base_length());
-    for p in &s.poses {
-        w.add_epoch(p, 0.0).unwrap();
-    }
-    let ids: Vec<u32> = s.points.iter().map(|p| w.add_point(*p).unwrap()).collect();
-    let wt = 1.0 / (SIGMA_MM * SIGMA_MM);
-    for (e, c, p, xy, _) in &s.obs {
-        let (cam, xy) = if *c == 0 {
-            (Camera::Left, *xy)
-        } else {
-            (Camera::Right, right(*xy))
-        };
-        w.add_observation(Observation::new(*e as u32, cam, ids[*p], xy, [wt, wt]))
-            .unwrap();
-    }
+    let ids = fill_whole_scene(&mut w, s, right);
     let r = w.solve().unwrap();
     assert!(r.converged, "{r:?}");
-    // RMS error of the adjusted points against the truth, metres.
-    let sq: f64 = ids
-        .iter()
-        .zip(&s.points)
-        .filter_map(|(id, t)| {
-            w.point(*id)
-                .map(|p| (0..3).map(|a| (p[a] - t[a]).powi(2)).sum::<f64>())
-        })
-        .sum();
-    let rms = libm::sqrt(sq / ids.len() as f64);
+    let rms = point_rms(&w, &ids, s);
     (
         w.rig(),
         w.rig_std(),
@@ -1471,17 +1482,7 @@ fn held_run(s: &Scene, start: &Rig, hold: bool, correct: bool) -> HeldRun {
     let mut mem = arena_for(&cfg);
     let mut arena = Arena::new(&mut mem);
     let mut w = Window::new(cfg, start, &mut arena).unwrap();
-    w.set_base_length(s.rig.base_length());
-    for p in &s.poses {
-        w.add_epoch(p, 0.0).unwrap();
-    }
-    let ids: Vec<u32> = s.points.iter().map(|p| w.add_point(*p).unwrap()).collect();
-    let wt = 1.0 / (SIGMA_MM * SIGMA_MM);
-    for (e, c, p, xy, _) in &s.obs {
-        let cam = if *c == 0 { Camera::Left } else { Camera::Right };
-        w.add_observation(Observation::new(*e as u32, cam, ids[*p], *xy, [wt, wt]))
-            .unwrap();
-    }
+    let ids = fill_whole_scene(&mut w, s, |xy| xy);
     let mut r = w.solve().unwrap();
     let mut statistic = [0.0; 2];
     let mut dof = 0;
@@ -1498,14 +1499,6 @@ fn held_run(s: &Scene, start: &Rig, hold: bool, correct: bool) -> HeldRun {
         }
     }
     assert!(r.converged, "{r:?}");
-    let sq: f64 = ids
-        .iter()
-        .zip(&s.points)
-        .filter_map(|(id, t)| {
-            w.point(*id)
-                .map(|p| (0..3).map(|a| (p[a] - t[a]).powi(2)).sum::<f64>())
-        })
-        .sum();
     HeldRun {
         poses: (0..w.n_epochs())
             .map(|i| w.epoch_pose(i).unwrap())
@@ -1513,7 +1506,7 @@ fn held_run(s: &Scene, start: &Rig, hold: bool, correct: bool) -> HeldRun {
         statistic,
         effect_px,
         dof,
-        rms: libm::sqrt(sq / ids.len() as f64),
+        rms: point_rms(&w, &ids, s),
         rig: w.rig(),
         interior: w.interior(),
     }
