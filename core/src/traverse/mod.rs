@@ -362,11 +362,6 @@ impl<'a> Traverse<'a> {
         self.cur = fill;
         self.have_prev = true;
         out.flags |= match report.status {
-            // The matcher calls an epoch lost below its own (fallback) threshold; the
-            // traverse is lost only when too few tie points remain to adjust it.
-            MatchStatus::Lost if (report.tie_points as usize) < self.cfg.min_tie_points => {
-                flags::LOST
-            }
             MatchStatus::NoKeypoints => flags::NO_FEATURES,
             MatchStatus::NoStereoMatches => flags::NO_STEREO,
             _ => 0,
@@ -376,6 +371,15 @@ impl<'a> Traverse<'a> {
         let images = (left, right);
         let adjusted =
             self.adjust_epoch(k, (time_s, aux), &prediction, images, &mut out, clock, t2);
+        // The matcher calls an epoch lost below its own (fallback) threshold of
+        // descriptor matches; the traverse is lost only when too few tie points remain
+        // to adjust it, those the templates found by area matching included (at
+        // 320x240 the descriptors alone fell short at half the epochs of the rendered
+        // streets that the area tie points carried well).
+        if report.status == MatchStatus::Lost && (out.tie_points as usize) < self.cfg.min_tie_points
+        {
+            out.flags |= flags::LOST;
+        }
         // The templates of this image serve the next epoch only if it is in the window.
         let added = self.prev_window_epoch.filter(|&e| Some(e) != before);
         self.store_patches(fill, left, added);

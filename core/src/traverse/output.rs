@@ -5,7 +5,9 @@ use crate::camera::Pose;
 pub mod flags {
     /// Fewer tie points than `min_tie_points`: the epoch leans on its prediction.
     pub const FEW_TIE_POINTS: u32 = 1 << 0;
-    /// The matcher lost continuity (a frame from another place, a large jump).
+    /// Continuity was lost (a frame from another place, a large jump): the matcher
+    /// found too few descriptor matches and fewer than `min_tie_points` tie points,
+    /// area-matched ones included, carried the epoch.
     pub const LOST: u32 = 1 << 1;
     /// An image has no usable keypoints (textureless, dark, saturated).
     pub const NO_FEATURES: u32 = 1 << 2;
