@@ -27,7 +27,7 @@ OUT = pathlib.Path(sys.argv[1]) if len(sys.argv) > 1 else pathlib.Path(__file__)
 
 
 def rot(w, p, k):
-    """M = Rk Rp Rw (DESIGN.md), vectorised over the leading axis."""
+    """M = Rk Rp Rw (docs/conventions.md, "Rotation and collinearity"), vectorised over the leading axis."""
     cw, sw, cp, sp, ck, sk = np.cos(w), np.sin(w), np.cos(p), np.sin(p), np.cos(k), np.sin(k)
     one, zero = np.ones_like(w), np.zeros_like(w)
     rw = np.stack([np.stack([one, zero, zero], -1), np.stack([zero, cw, sw], -1), np.stack([zero, -sw, cw], -1)], -2)

@@ -1,4 +1,6 @@
-//! The photogrammetric camera model and conventions of DESIGN.md.
+//! The photogrammetric camera model and conventions of docs/conventions.md
+//! ("Pixel convention", "Interior orientation and distortion", "Rotation and
+//! collinearity", "Stereo rig", "KITTI output").
 //!
 //! - Photo-coordinates in mm, origin at the image centre, x right, y up.
 //! - Interior orientation: focal length, principal point, radial (k1, k2) and
@@ -266,7 +268,8 @@ impl Interior {
     }
 }
 
-/// `Rw(omega)`, `Rp(phi)`, `Rk(kappa)` and their derivatives, as DESIGN.md writes them.
+/// `Rw(omega)`, `Rp(phi)`, `Rk(kappa)` and their derivatives, as docs/conventions.md
+/// ("Rotation and collinearity") writes them.
 fn r_omega(w: f64) -> (Matrix3<f64>, Matrix3<f64>) {
     let (s, c) = libm::sincos(w);
     (

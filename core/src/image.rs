@@ -1,7 +1,8 @@
 //! Integer image buffers: borrowed views over caller storage.
 //!
-//! Pixel convention (DESIGN.md): pixel centres at integer coordinates, `(0, 0)`
-//! is the centre of the top-left pixel, `c` is the column and `r` the row.
+//! Pixel convention (docs/conventions.md, "Pixel convention"): pixel centres at
+//! integer coordinates, `(0, 0)` is the centre of the top-left pixel, `c` is the
+//! column and `r` the row.
 
 /// Why an image buffer was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -187,6 +187,12 @@ impl PipelineSettings {
         )
     }
 
+    /// The datum the traverse starts from: the settings' `[datum]` when given, else the
+    /// dataset's. The poses written are relative to it.
+    pub fn datum_for(&self, dataset_datum: &Pose) -> Pose {
+        self.datum.map_or(*dataset_datum, |d| d.pose())
+    }
+
     /// The configuration message for a dataset's rig, datum and calibration precision
     /// (the settings' `[datum]`, when given, wins over `dataset_datum`).
     pub fn configure_for(
@@ -196,7 +202,7 @@ impl PipelineSettings {
         precision: &CalibrationPrecision,
     ) -> Configure {
         let (w, h) = (rig.left.width_px, rig.left.height_px);
-        let datum = self.datum.map_or(*dataset_datum, |d| d.pose());
+        let datum = self.datum_for(dataset_datum);
         Configure {
             version: CONFIG_VERSION,
             traverse: TraverseSettings {

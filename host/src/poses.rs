@@ -1,5 +1,5 @@
 //! KITTI pose text files: one pose per line, the 12 numbers of the 3x4 matrix
-//! `[R | t]` row by row (DESIGN.md, "KITTI output"). Shared by `synth`
+//! `[R | t]` row by row (docs/conventions.md, "KITTI output"). Shared by `synth`
 //! (ground truth), `run` (estimates) and `eval`.
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};

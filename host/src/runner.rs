@@ -131,6 +131,8 @@ struct Run<'d> {
     unreadable: Vec<usize>,
     accepted: ConfigAccepted,
     settings: PipelineSettings,
+    /// The datum of epoch 0: the poses written and the ground truth are relative to it.
+    datum: Pose,
     /// The rig the right cameras are placed with: the calibration, or the last estimate.
     rig: Rig,
     /// Two-sided global test of each adjusted epoch (from sigma0 and the redundancy).
@@ -166,6 +168,7 @@ impl<'d> Run<'d> {
             unreadable: Vec::new(),
             accepted,
             settings: opts.settings,
+            datum: opts.settings.datum_for(&ds.datum),
             rig: ds.rig,
             chi2: Vec::new(),
             ties: TieCollector::default(),
@@ -222,7 +225,7 @@ impl<'d> Run<'d> {
     }
 
     fn push(&mut self, record: EpochRecord) -> Result<()> {
-        let k = kitti_from_pose(&self.ds.datum, &record.left.to_pose());
+        let k = kitti_from_pose(&self.datum, &record.left.to_pose());
         writeln!(self.poses_file, "{}", format_pose(&k))?;
         self.poses_file.flush()?;
         self.kitti.push(k);
@@ -234,7 +237,7 @@ impl<'d> Run<'d> {
     fn prediction(&self, time: f64) -> Pose {
         let e = &self.report.epochs;
         match e.len() {
-            0 => self.ds.datum,
+            0 => self.datum,
             1 => e[0].left.to_pose(),
             n => {
                 // Every record carries its time (`time_of`): index seconds without times.txt.
@@ -416,7 +419,7 @@ impl<'d> Run<'d> {
             self.report.ground_truth = Some(
                 gt_part
                     .iter()
-                    .map(|k| pose_from_kitti(&self.ds.datum, k).centre)
+                    .map(|k| pose_from_kitti(&self.datum, k).centre)
                     .collect(),
             );
             if let Ok(e) = evaluate(gt_part, &self.kitti) {

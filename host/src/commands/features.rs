@@ -1,5 +1,5 @@
 //! `phototraverse features IMAGE --out FILE`: reduced SIFT of one image in COLMAP's
-//! text format (DESIGN.md), timed without file input and output.
+//! text format (docs/conventions.md, "Outputs"), timed without file input and output.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};

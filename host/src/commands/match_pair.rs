@@ -28,7 +28,7 @@ pub struct Args {
     /// The pair is rectified: search along the same row.
     #[arg(long, conflicts_with = "rig", required_unless_present = "rig")]
     pub rectified: bool,
-    /// Calibrated rig (rig.toml, DESIGN.md): search along the epipolar curve.
+    /// Calibrated rig (rig.toml, docs/conventions.md): search along the epipolar curve.
     #[arg(long)]
     pub rig: Option<PathBuf>,
     /// Output file (tie points, one per line).

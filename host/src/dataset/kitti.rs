@@ -1,6 +1,6 @@
 //! KITTI odometry calibration (`calib.txt`) to a photogrammetric rig.
 //!
-//! DESIGN.md, "Dataset layouts": pixel units serve as photo units, `sx = 1`,
+//! docs/conventions.md, "Dataset layouts": pixel units serve as photo units, `sx = 1`,
 //! `sy = fx/fy`, `f = fx`, `x0 = cx - (W-1)/2`, `y0 = -(cy - (H-1)/2) sy`, no
 //! distortion, base `B = -P1[0][3] / fx` along x.
 use super::DatasetError;

@@ -1,5 +1,5 @@
 //! Stereo datasets on disk: the KITTI odometry layout and the photogrammetric
-//! `rig.toml` layout of DESIGN.md, "Dataset layouts".
+//! `rig.toml` layout of docs/conventions.md, "Dataset layouts".
 //!
 //! [`Dataset::open`] detects the layout, reads the calibration, pairs the left
 //! and right images epoch by epoch and checks every image header, so a

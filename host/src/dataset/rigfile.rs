@@ -1,4 +1,4 @@
-//! The photogrammetric rig file `rig.toml` (DESIGN.md, "Dataset layouts"):
+//! The photogrammetric rig file `rig.toml` (docs/conventions.md, "Dataset layouts"):
 //! reading with clear errors and writing.
 use super::DatasetError;
 use phototraverse_core::camera::{Interior, Pose, Rig};
@@ -257,7 +257,7 @@ pub fn rig_toml_text(rig: &Rig, datum: &Pose) -> String {
         precision: None,
     };
     let body = toml::to_string(&file).unwrap_or_default();
-    format!("# phototraverse rig file (DESIGN.md, Dataset layouts)\n{body}")
+    format!("# phototraverse rig file (docs/conventions.md, Dataset layouts)\n{body}")
 }
 
 /// Writes `rig.toml`.
