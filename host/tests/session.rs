@@ -263,11 +263,16 @@ fn ensure_firmware_binary() {
 
 fn build_firmware_binary() {
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    // The binary is looked for beside this test's own: build it with the same profile
+    // (`cargo test --release` runs from target/release).
+    let exe = std::env::current_exe().expect("the test's own path");
+    let release = exe.components().any(|c| c.as_os_str() == "release");
+    let profile = if release { "release" } else { "test" };
     let ok = std::process::Command::new(cargo)
         .args([
             "build",
             "--profile",
-            "test",
+            profile,
             "-p",
             "phototraverse-firmware-sim",
             "--bin",

@@ -272,10 +272,61 @@ fn split(x: f32, n: usize) -> (usize, f32) {
     (i, x - i as f32)
 }
 
+/// Re-centring passes after the search (see [`correlate_centred`]).
+const RECENTRE_PASSES: usize = 2;
+
+/// A re-centring pass that moves the estimate less than this (pixels) ends them.
+const RECENTRE_SETTLED_PX: f32 = 0.02;
+
 /// Correlates the template `tpl` (half-size `h`, as [`sample_template`] wrote it) with
 /// `img` at whole-pixel offsets up to `(rx, ry)` around `centre`; a parabola through the
 /// peak and its neighbours gives the sub-pixel position on each searched axis.
 pub fn correlate(
+    tpl: &[f32; TEMPLATE_LEN],
+    h: usize,
+    img: &ImageView<'_>,
+    centre: [f32; 2],
+    (rx, ry): (usize, usize),
+    min_ncc: f32,
+) -> Result<([f32; 2], f32), RefineError> {
+    correlate_grid(tpl, h, img, centre, (rx, ry), min_ncc)
+}
+
+/// [`correlate`], then again on grids centred on the estimate.
+///
+/// The parabola is biased towards the sampled grid (pixel locking), and the grid is
+/// `centre` plus whole pixels: the estimate leans towards the start. For a tie point
+/// the start is the keypoint's own position, displaced along the image motion, or the
+/// motion prediction; re-centred, the parabola's vertex is near its middle sample and
+/// unbiased. On 100 rendered epochs of the curved street, `curves` went from 0.075 %
+/// and 0.0014 deg/m to 0.053 % and 0.0009 deg/m. The stereo refinement keeps the single
+/// pass: there the leaning towards the start is what lets a converging rig's matches
+/// pass the left-right check, and re-centred it lost a fifth of them.
+pub fn correlate_centred(
+    tpl: &[f32; TEMPLATE_LEN],
+    h: usize,
+    img: &ImageView<'_>,
+    centre: [f32; 2],
+    (rx, ry): (usize, usize),
+    min_ncc: f32,
+) -> Result<([f32; 2], f32), RefineError> {
+    let (mut at, mut peak) = correlate_grid(tpl, h, img, centre, (rx, ry), min_ncc)?;
+    let step = (1, ry.min(1));
+    for _ in 0..RECENTRE_PASSES {
+        let Ok((next, p)) = correlate_grid(tpl, h, img, at, step, min_ncc) else {
+            break;
+        };
+        let moved = (next[0] - at[0]).abs().max((next[1] - at[1]).abs());
+        (at, peak) = (next, p);
+        if moved < RECENTRE_SETTLED_PX {
+            break;
+        }
+    }
+    Ok((at, peak))
+}
+
+/// One correlation on the grid `centre` plus whole pixels (see [`correlate`]).
+fn correlate_grid(
     tpl: &[f32; TEMPLATE_LEN],
     h: usize,
     img: &ImageView<'_>,

@@ -37,7 +37,7 @@ use crate::budget::{Arena, OutOfMemory};
 use crate::camera::Pose;
 use crate::features::FeatureSet;
 use crate::image::ImageView;
-use crate::matching::refine::{correlate, magnify_template, refine_checked, TEMPLATE_LEN};
+use crate::matching::refine::{correlate_centred, magnify_template, refine_checked, TEMPLATE_LEN};
 use crate::matching::{
     relative_motion, EpochStatus as MatchStatus, Features, MatchError, Matcher, StereoFeatures,
     TiePoint,
@@ -494,7 +494,8 @@ impl<'a> Traverse<'a> {
             if !template_at_scale(patches, entry, scale, &mut tpl) {
                 continue;
             }
-            let Ok((l, _)) = correlate(&tpl, h, left, tie.cur.left, (rad, rad), rcfg.min_ncc)
+            let Ok((l, _)) =
+                correlate_centred(&tpl, h, left, tie.cur.left, (rad, rad), rcfg.min_ncc)
             else {
                 continue;
             };
@@ -683,16 +684,16 @@ impl<'a> Traverse<'a> {
             self.corr[n] = Correspondence { point: xyz, xy };
             n += 1;
         }
-        self.resect_on(n)
+        self.resect_on(n, self.cfg.min_tie_points)
     }
 
     /// Robust resection of the current left camera on the first `n` correspondences;
-    /// a pose only with at least `min_tie_points` inliers.
-    fn resect_on(&self, n: usize) -> Option<Pose> {
+    /// a pose only with at least `min_inliers` inliers.
+    fn resect_on(&self, n: usize, min_inliers: usize) -> Option<Pose> {
         let mut rcfg = self.cfg.resection;
         rcfg.threshold_mm = 3.0 * self.cfg.sigma_px * self.cfg.rig.left.pixel_size_mm[0];
         let r = resect(&self.corr[..n], self.cfg.rig.left.focal_mm, &rcfg).ok()?;
-        (r.inliers >= self.cfg.min_tie_points).then_some(r.pose)
+        (r.inliers >= min_inliers).then_some(r.pose)
     }
 
     /// Resection of the current left camera on the previous stereo pair's points that
@@ -721,7 +722,7 @@ impl<'a> Traverse<'a> {
             self.corr[n] = Correspondence { point: xyz, xy };
             n += 1;
         }
-        self.resect_on(n)
+        self.resect_on(n, config::RELOCALIZATION_MIN_INLIERS)
     }
 
     /// Adds the epoch's tie points: observations of known points, new points by

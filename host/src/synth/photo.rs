@@ -13,6 +13,11 @@ use anyhow::{bail, Context, Result};
 /// Size of one photograph texel on a facade, metres: from `TEXEL_M.0` to `TEXEL_M.1`.
 pub const TEXEL_M: (f64, f64) = (0.01, 0.03);
 
+/// Levels every photograph's pyramid holds at least (when its size allows): the
+/// photograph is cropped to sides that are multiples of `2^EXACT_LEVELS`. Six levels
+/// reach 64 texels (0.6 to 2 m) per pixel, beyond the widest footprint of a facade.
+const EXACT_LEVELS: u32 = 6;
+
 /// Most taps along the long axis of an oblique footprint (beyond, a coarser level).
 const MAX_TAPS: usize = 8;
 
@@ -48,9 +53,23 @@ impl Level {
         top * (1.0 - fy) + bot * fy
     }
 
-    /// The next coarser level (2x2 box average, odd edges mirrored).
+    /// The top-left part whose sides are multiples of `2^EXACT_LEVELS` (or of the
+    /// largest power of two a smaller photograph allows), so that many levels halve
+    /// it exactly (see [`pyramid`]).
+    fn cropped_to_halve(self) -> Level {
+        let side = self.w.min(self.h).max(1);
+        let largest = 1usize << (usize::BITS - 1 - side.leading_zeros());
+        let unit = largest.min(1 << EXACT_LEVELS);
+        let (w, h) = (self.w / unit * unit, self.h / unit * unit);
+        let data = (0..h)
+            .flat_map(|y| self.data[y * self.w..y * self.w + w].iter().copied())
+            .collect();
+        Level { w, h, data }
+    }
+
+    /// The next coarser level (2x2 box average).
     fn halved(&self) -> Level {
-        let (w, h) = (self.w.div_ceil(2), self.h.div_ceil(2));
+        let (w, h) = (self.w / 2, self.h / 2);
         let mut data = Vec::with_capacity(w * h);
         for y in 0..h as i64 {
             for x in 0..w as i64 {
@@ -158,7 +177,7 @@ impl Photos {
                 bail!("{}: a photo texture needs at least 2x2 pixels", f.display());
             }
             let data = img.as_raw().iter().map(|&v| v as f32 / 255.0).collect();
-            pyramids.push(pyramid(Level { w, h, data }));
+            pyramids.push(pyramid(Level { w, h, data }.cropped_to_halve()));
         }
         Ok(Photos { pyramids })
     }
@@ -217,9 +236,19 @@ impl Photos {
     }
 }
 
+/// The levels that halve `base` exactly. The texture tiles by mirroring, so a level's
+/// period is twice its size: a level of an odd size (halved with the odd edge
+/// mirrored, `ceil(n / 2)` texels) would repeat every `2 n + 2` texels of the base
+/// instead of `2 n`, and be displaced from the finer levels by two texels more at each
+/// tile. Blended with a finer level, as the footprint changes with distance, such a
+/// displaced copy made the facades slide: a feature's rendered position moved by 0.06
+/// px per epoch more than the camera's motion explains in the turns of `photo-curves`.
 fn pyramid(base: Level) -> Vec<Level> {
     let mut levels = vec![base];
-    while let Some(last) = levels.last().filter(|l| l.w > 1 || l.h > 1) {
+    while let Some(last) = levels
+        .last()
+        .filter(|l| l.w > 1 && l.h > 1 && l.w % 2 == 0 && l.h % 2 == 0)
+    {
         let next = last.halved();
         levels.push(next);
     }
@@ -307,6 +336,34 @@ mod tests {
         };
         let v = p.sample(&AT_2CM, 11.0 * T, 0.7, &along_v);
         assert!((v - 1.0).abs() < 1e-9, "{v}");
+    }
+
+    #[test]
+    fn every_level_repeats_with_the_photograph() {
+        // An odd-sized photograph: cropped so that its levels halve it exactly.
+        let (w, h) = (131, 70);
+        let data = (0..w * h)
+            .map(|i| ((i * 7919) % 251) as f32 / 250.0)
+            .collect();
+        let p = Photos {
+            pyramids: vec![pyramid(Level { w, h, data }.cropped_to_halve())],
+        };
+        let sizes: Vec<_> = p.pyramids[0].iter().map(|l| (l.w, l.h)).collect();
+        assert_eq!(sizes[..3], [(128, 64), (64, 32), (32, 16)]);
+        // The tiling (mirrored, so a period of two photographs) is the same at every
+        // level: ten periods along u the texture is the same at every footprint.
+        let period = 2.0 * 128.0 * T;
+        for lod in 0..6 {
+            let fp = Footprint::round((1u64 << lod) as f64 * T * 1.2);
+            for i in 0..20 {
+                let (u, v) = (0.37 * i as f64, 0.41 + 0.05 * i as f64);
+                let (a, b) = (
+                    p.sample(&AT_2CM, u, v, &fp),
+                    p.sample(&AT_2CM, u + 10.0 * period, v, &fp),
+                );
+                assert!((a - b).abs() < 1e-5, "level {lod}, u {u}: {a} vs {b}");
+            }
+        }
     }
 
     #[test]
