@@ -17,7 +17,7 @@ use super::patches::{PatchInfo, NO_ID};
 use super::Traverse;
 use crate::camera::{project_to_pixel, Pose};
 use crate::image::ImageView;
-use crate::matching::refine::{correlate_centred, refine_checked, TEMPLATE_LEN};
+use crate::matching::refine::{correlate, recentre, refine_checked, TEMPLATE_LEN};
 use bytemuck::{Pod, Zeroable};
 
 /// A tie point found by area matching.
@@ -117,11 +117,11 @@ impl Traverse<'_> {
             if !super::template_at_scale(patches, i, scale, &mut tpl) {
                 continue;
             }
-            let Ok((l, _)) =
-                correlate_centred(&tpl, patches.half(), left, pl, (r, r), rcfg.min_ncc)
-            else {
+            let half = patches.half();
+            let Ok(found) = correlate(&tpl, half, left, pl, (r, r), rcfg.min_ncc) else {
                 continue;
             };
+            let (l, _) = recentre(&tpl, half, left, found, (1, 1), rcfg.min_ncc);
             let Ok((right_px, _)) = refine_checked(left, right, l, pr, &rcfg) else {
                 continue;
             };

@@ -37,7 +37,9 @@ use crate::budget::{Arena, OutOfMemory};
 use crate::camera::Pose;
 use crate::features::FeatureSet;
 use crate::image::ImageView;
-use crate::matching::refine::{correlate_centred, magnify_template, refine_checked, TEMPLATE_LEN};
+use crate::matching::refine::{
+    correlate, magnify_template, recentre, refine_checked, TEMPLATE_LEN,
+};
 use crate::matching::{
     relative_motion, EpochStatus as MatchStatus, Features, MatchError, Matcher, StereoFeatures,
     TiePoint,
@@ -494,11 +496,10 @@ impl<'a> Traverse<'a> {
             if !template_at_scale(patches, entry, scale, &mut tpl) {
                 continue;
             }
-            let Ok((l, _)) =
-                correlate_centred(&tpl, h, left, tie.cur.left, (rad, rad), rcfg.min_ncc)
-            else {
+            let Ok(found) = correlate(&tpl, h, left, tie.cur.left, (rad, rad), rcfg.min_ncc) else {
                 continue;
             };
+            let (l, _) = recentre(&tpl, h, left, found, (1, 1), rcfg.min_ncc);
             let Ok((r, _)) = refine_checked(left, right, l, tie.cur.right, &rcfg) else {
                 continue;
             };
