@@ -2,14 +2,14 @@
 //! FrameEnd fill one preallocated buffer; the length and the whole-frame CRC
 //! are checked, and u16 frames are scaled to 8 bits in place.
 use super::crc::Crc32;
-use super::messages::{FrameBegin, FrameChunk, FrameEnd, PixelFormat};
+use super::messages::{frame_bytes, FrameBegin, FrameChunk, FrameEnd, PixelFormat};
 use crate::image::ImageView;
 
 /// Why a frame message was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum AssemblyError {
     /// The frame is larger than the buffer or the configured size.
-    TooLarge { bytes: usize, capacity: usize },
+    TooLarge { bytes: u64, capacity: u64 },
     /// A chunk or end without a matching FrameBegin.
     NotStarted,
     /// A chunk whose offset is not the next expected byte.
@@ -83,17 +83,18 @@ impl<'a> FrameAssembler<'a> {
             _ => None,
         };
         let bytes = begin.frame_bytes();
-        let capacity = self.buf.len();
+        let capacity = self.buf.len() as u64;
         if begin.width > self.max_width
             || begin.height > self.max_height
             || bytes > capacity
             || bytes == 0
         {
             self.state = State::Failed { epoch: begin.epoch };
-            let capacity = capacity.min(
-                self.max_width as usize * self.max_height as usize * begin.format.bytes_per_pixel(),
-            );
-            return Err(AssemblyError::TooLarge { bytes, capacity });
+            let configured = frame_bytes(self.max_width, self.max_height, begin.format);
+            return Err(AssemblyError::TooLarge {
+                bytes,
+                capacity: capacity.min(configured),
+            });
         }
         self.state = State::Receiving {
             begin,
@@ -123,7 +124,7 @@ impl<'a> FrameAssembler<'a> {
         }
         let start = *next as usize;
         let end = start + chunk.data.len();
-        if end > begin.frame_bytes() {
+        if end as u64 > begin.frame_bytes() {
             self.state = State::Failed { epoch: chunk.epoch };
             return Err(AssemblyError::Overrun);
         }
@@ -145,7 +146,7 @@ impl<'a> FrameAssembler<'a> {
                 return Err(AssemblyError::NotStarted);
             }
         };
-        if next != end.total_bytes || next as usize != begin.frame_bytes() {
+        if next != end.total_bytes || next as u64 != begin.frame_bytes() {
             return Err(AssemblyError::Length {
                 expected: end.total_bytes,
                 got: next,

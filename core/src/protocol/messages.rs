@@ -609,6 +609,11 @@ impl PixelFormat {
     }
 }
 
+/// Bytes of a `width` x `height` frame of `format`, exact on every target.
+pub fn frame_bytes(width: u16, height: u16, format: PixelFormat) -> u64 {
+    width as u64 * height as u64 * format.bytes_per_pixel() as u64
+}
+
 /// Host -> firmware: a frame of one camera of an epoch starts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FrameBegin {
@@ -622,9 +627,10 @@ pub struct FrameBegin {
 }
 
 impl FrameBegin {
-    /// Bytes of the frame on the wire.
-    pub fn frame_bytes(&self) -> usize {
-        self.width as usize * self.height as usize * self.format.bytes_per_pixel()
+    /// Bytes of the frame on the wire. In `u64`: the largest frame the fields allow
+    /// (65535 x 65535 x 2 bytes) overflows the 32-bit `usize` of a microcontroller.
+    pub fn frame_bytes(&self) -> u64 {
+        frame_bytes(self.width, self.height, self.format)
     }
 }
 

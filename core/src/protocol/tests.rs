@@ -753,3 +753,19 @@ mod rand_free {
         }
     }
 }
+
+#[test]
+fn the_largest_frame_the_fields_allow_is_counted_exactly_and_refused() {
+    // 65535 x 65535 x 2 bytes: more than a 32-bit usize holds.
+    let b = begin(1, u16::MAX, u16::MAX, PixelFormat::Gray16 { bits: 16 });
+    assert_eq!(b.frame_bytes(), 8_589_672_450);
+    let mut buf = [0u8; 64];
+    let mut a = FrameAssembler::new(&mut buf, 8, 4);
+    assert_eq!(
+        a.begin(b),
+        Err(AssemblyError::TooLarge {
+            bytes: 8_589_672_450,
+            capacity: 64,
+        })
+    );
+}

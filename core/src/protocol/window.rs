@@ -19,6 +19,10 @@ pub struct TxWindow<'a> {
     lens: [u16; MAX_WINDOW],
     /// Sequence number of the oldest unacknowledged packet.
     base: u16,
+    /// Slot of the oldest packet: the slots are a ring from here, so any slot count
+    /// works across the sequence wrap (`seq % slots` would not: 65535 and 0 are
+    /// consecutive packets but `65535 % 5 == 0 % 5`).
+    head: usize,
     /// Packets held (unacknowledged).
     count: usize,
 }
@@ -47,6 +51,7 @@ impl<'a> TxWindow<'a> {
             slots,
             lens: [0; MAX_WINDOW],
             base: 0,
+            head: 0,
             count: 0,
         }
     }
@@ -75,11 +80,13 @@ impl<'a> TxWindow<'a> {
     /// Forgets everything and restarts at `next_seq`.
     pub fn reset(&mut self, next_seq: u16) {
         self.base = next_seq;
+        self.head = 0;
         self.count = 0;
     }
 
-    fn slot_of(&self, seq: u16) -> usize {
-        seq as usize % self.slots
+    /// The slot of the packet `k` places after the oldest (`k < slots`).
+    fn slot_at(&self, k: usize) -> usize {
+        (self.head + k) % self.slots
     }
 
     /// Holds the encoded packet `bytes` sent with sequence number `seq`.
@@ -93,7 +100,7 @@ impl<'a> TxWindow<'a> {
         if seq != self.base.wrapping_add(self.count as u16) {
             return Err(WindowError::OutOfSequence);
         }
-        let i = self.slot_of(seq);
+        let i = self.slot_at(self.count);
         let start = i * self.slot_len;
         self.storage[start..start + bytes.len()].copy_from_slice(bytes);
         self.lens[i] = bytes.len() as u16;
@@ -109,6 +116,7 @@ impl<'a> TxWindow<'a> {
             return 0;
         }
         self.base = next_expected;
+        self.head = self.slot_at(d as usize);
         self.count -= d as usize;
         d as usize
     }
@@ -117,7 +125,7 @@ impl<'a> TxWindow<'a> {
     pub fn unacked_from(&self, from: u16) -> impl Iterator<Item = &[u8]> + '_ {
         let skip = seq_diff(from, self.base).clamp(0, self.count as i16) as usize;
         (skip..self.count).map(move |k| {
-            let i = self.slot_of(self.base.wrapping_add(k as u16));
+            let i = self.slot_at(k);
             let start = i * self.slot_len;
             &self.storage[start..start + self.lens[i] as usize]
         })
@@ -227,6 +235,33 @@ mod tests {
         w.push(2, &[4]).unwrap();
         assert_eq!(w.ack(3), 3);
         assert!(w.is_empty());
+    }
+
+    #[test]
+    fn any_slot_count_keeps_every_packet_across_the_wrap() {
+        // Five slots: with `seq % slots`, 65535 and 0 would share a slot.
+        for slots in [3usize, 5, 7] {
+            let mut storage = [0u8; 7 * 4];
+            let mut w = TxWindow::new(&mut storage[..slots * 4], 4);
+            w.reset(65530);
+            let mut next = 65530u16;
+            let mut acked = next;
+            for round in 0..20u8 {
+                while !w.is_full() {
+                    w.push(next, &[next as u8, round]).unwrap();
+                    next = next.wrapping_add(1);
+                }
+                // Everything held replays in order, each packet its own bytes.
+                let held: heapless::Vec<u8, 8> = w.unacked_from(acked).map(|p| p[0]).collect();
+                let want: heapless::Vec<u8, 8> = (0..slots as u16)
+                    .map(|k| acked.wrapping_add(k) as u8)
+                    .collect();
+                assert_eq!(held, want, "{slots} slots, round {round}");
+                // Acknowledge one or two, as a receiver would.
+                acked = acked.wrapping_add(1 + (round % 2) as u16);
+                w.ack(acked);
+            }
+        }
     }
 
     #[test]
