@@ -41,6 +41,14 @@ enum Command {
 
 fn main() {
     let cli = Cli::parse();
+    // Not for the commands that talk to a firmware process: a firmware that dies must
+    // be an error the run reports (keeping the poses processed), not the end of it.
+    if !matches!(
+        cli.command,
+        Command::Demo(_) | Command::Run(_) | Command::Firmware { .. }
+    ) {
+        restore_sigpipe();
+    }
     let result = match cli.command {
         Command::Demo(a) => commands::demo::run(a),
         Command::Run(a) => commands::run::run(a),
@@ -57,5 +65,16 @@ fn main() {
     if let Err(err) = result {
         eprintln!("phototraverse: error: {err:#}");
         std::process::exit(1);
+    }
+}
+
+/// A closed pipe ends the process quietly, as it does other command-line tools
+/// (`phototraverse budget | head`): Rust ignores SIGPIPE, so `println!` would panic
+/// on the broken pipe instead. Called before any thread exists.
+fn restore_sigpipe() {
+    #[cfg(unix)]
+    // SAFETY: called first in main, before any thread exists; SIG_DFL is a valid handler.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }

@@ -1,0 +1,43 @@
+//! `phototraverse budget` from the command line: its table, and a reader that goes
+//! away (`budget | head`) ends it quietly instead of a panic on the closed pipe.
+mod common;
+use common::ok;
+use std::process::{Command, Stdio};
+
+#[test]
+fn budget_prints_the_embedded_profile_fitting_in_512k() {
+    let out = ok(&[
+        "budget",
+        "--width",
+        "320",
+        "--height",
+        "240",
+        "--config",
+        concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../configs/embedded-320x240.toml"
+        ),
+        "--ram",
+        "512K",
+    ]);
+    assert!(
+        out.contains("excluding frames: fits in 524288 bytes of RAM"),
+        "{out}"
+    );
+}
+
+#[test]
+fn a_reader_that_stops_early_ends_it_quietly() {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_phototraverse"))
+        .args(["budget", "--width", "640", "--height", "480"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("binary runs");
+    // The reader goes away before the table is written (`budget | true`).
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(stderr.is_empty(), "{stderr}");
+}
