@@ -413,11 +413,8 @@ fn the_firmware_reports_each_record_once() {
 
 /// The twelve numbers of each line of a KITTI pose file.
 fn read_kitti(path: &Path) -> Vec<Vec<f64>> {
-    std::fs::read_to_string(path)
-        .unwrap()
-        .lines()
-        .map(|l| l.split_whitespace().map(|v| v.parse().unwrap()).collect())
-        .collect()
+    let poses = phototraverse_host::poses::read_poses(path).unwrap();
+    poses.iter().map(|p| p.concat()).collect()
 }
 
 #[test]

@@ -40,7 +40,7 @@ pub fn refine_checked(
     cfg: &RefineConfig,
 ) -> Result<([f32; 2], f32), RefineError> {
     let (tpl, h) = left_template(left_img, left, cfg)?;
-    let (p, score) = search_right(&tpl, right_img, left, right, cfg)?;
+    let (p, score) = search_right(&tpl, h, right_img, left, right, cfg)?;
     if cfg.back_check_px > 0.0 {
         let back_cfg = RefineConfig {
             min_ncc: f32::MIN,
@@ -212,8 +212,8 @@ pub fn refine_match(
     right: [f32; 2],
     cfg: &RefineConfig,
 ) -> Result<([f32; 2], f32), RefineError> {
-    let (tpl, _) = left_template(left_img, left, cfg)?;
-    search_right(&tpl, right_img, left, right, cfg)
+    let (tpl, h) = left_template(left_img, left, cfg)?;
+    search_right(&tpl, h, right_img, left, right, cfg)
 }
 
 /// The template of `left` and its half-size.
@@ -228,15 +228,15 @@ fn left_template(
     Ok((tpl, h))
 }
 
-/// The search of [`refine_match`] with the left template already sampled.
+/// The search of [`refine_match`] with the left template (half-size `h`) sampled.
 fn search_right(
     tpl: &[f32; TEMPLATE_LEN],
+    h: usize,
     right_img: &ImageView<'_>,
     left: [f32; 2],
     right: [f32; 2],
     cfg: &RefineConfig,
 ) -> Result<([f32; 2], f32), RefineError> {
-    let h = (cfg.half_window as usize).min(MAX_REFINE_HALF);
     let centre = if cfg.rows_only {
         [right[0], left[1]]
     } else {

@@ -75,6 +75,15 @@ fn render(cam: &Interior, pose: &Pose) -> Vec<u8> {
     img
 }
 
+/// Renders the rig's two images with the left camera at `left` and processes them.
+fn process_view(t: &mut Traverse, rig: &Rig, left: &Pose, time: f64) -> EpochOutput {
+    let right = rig.right_pose(left);
+    let (li, ri) = (render(&rig.left, left), render(&rig.right, &right));
+    let lv = ImageView::new(&li, W as usize, H as usize).unwrap();
+    let rv = ImageView::new(&ri, W as usize, H as usize).unwrap();
+    t.process(&lv, &rv, time, &NoClock)
+}
+
 fn rig() -> Rig {
     Rig::rectified(Interior::pinhole_px(W, H, 300.0), 0.5)
 }
@@ -144,9 +153,6 @@ fn follows_a_known_motion_and_survives_a_bad_frame() {
     let rig = rig();
     let mut outputs = Vec::new();
     for k in 0..7 {
-        let left = truth(k);
-        let right = rig.right_pose(&left);
-        let (li, ri) = (render(&rig.left, &left), render(&rig.right, &right));
         if k == 4 {
             // A frame of the wrong size: rejected, the state stays as it was.
             let bad = vec![0u8; 10 * 10];
@@ -155,9 +161,7 @@ fn follows_a_known_motion_and_survives_a_bad_frame() {
             assert_eq!(out.status, EpochStatus::Rejected);
             assert_ne!(out.flags & flags::BAD_IMAGE, 0);
         }
-        let lv = ImageView::new(&li, W as usize, H as usize).unwrap();
-        let rv = ImageView::new(&ri, W as usize, H as usize).unwrap();
-        outputs.push((k, t.process(&lv, &rv, k as f64, &NoClock)));
+        outputs.push((k, process_view(&mut t, &rig, &truth(k), k as f64)));
     }
     for (k, out) in &outputs {
         let want = truth(*k);
@@ -222,10 +226,7 @@ fn area_matching_carries_tie_points_to_the_same_scene_point() {
         let (mut ties, mut checked, mut far, mut sum2) = (0u32, 0usize, 0usize, 0.0);
         for k in 0..6 {
             let (left, right) = (truth(k), rig.right_pose(&truth(k)));
-            let (li, ri) = (render(&rig.left, &left), render(&rig.right, &right));
-            let lv = ImageView::new(&li, W as usize, H as usize).unwrap();
-            let rv = ImageView::new(&ri, W as usize, H as usize).unwrap();
-            let out = t.process(&lv, &rv, k as f64, &NoClock);
+            let out = process_view(&mut t, &rig, &left, k as f64);
             assert_eq!(out.flags & flags::FLAGGING, 0, "epoch {k}: {out:?}");
             ties += out.tie_points;
             // Every area tie point: its current left position, cast into the scene,
@@ -290,11 +291,7 @@ fn a_frame_from_another_place_is_lost_and_the_traverse_recovers() {
             // 400 m further along the wall: the same kind of texture, none of its points.
             left.centre[0] += 400.0;
         }
-        let right = rig.right_pose(&left);
-        let (li, ri) = (render(&rig.left, &left), render(&rig.right, &right));
-        let lv = ImageView::new(&li, W as usize, H as usize).unwrap();
-        let rv = ImageView::new(&ri, W as usize, H as usize).unwrap();
-        let out = t.process(&lv, &rv, k as f64, &NoClock);
+        let out = process_view(&mut t, &rig, &left, k as f64);
         let lost = out.flags & flags::LOST != 0;
         // The epoch after the stray frame has nothing to tie to either (its previous
         // epoch is the stray one): lost too, posed by the prediction. From the next
@@ -330,12 +327,7 @@ fn tie_points_found_by_area_matching_keep_an_epoch_from_being_lost() {
     let rig = rig();
     let mut carried = 0;
     for k in 0..7 {
-        let left = truth(k);
-        let right = rig.right_pose(&left);
-        let (li, ri) = (render(&rig.left, &left), render(&rig.right, &right));
-        let lv = ImageView::new(&li, W as usize, H as usize).unwrap();
-        let rv = ImageView::new(&ri, W as usize, H as usize).unwrap();
-        let out = t.process(&lv, &rv, k as f64, &NoClock);
+        let out = process_view(&mut t, &rig, &truth(k), k as f64);
         if k == 0 {
             continue;
         }
