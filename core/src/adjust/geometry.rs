@@ -137,13 +137,28 @@ pub fn project_rig(
 ) -> Result<RigProjection, CameraError> {
     let l = Rotations::new(left.omega, left.phi, left.kappa);
     let r = Rotations::new(rig.angles[0], rig.angles[1], rig.angles[2]);
-    project_with(&l, &left.centre, &r, &rig.base, camera, focal_mm, point)
+    let right = right_rotation(&l, &r);
+    let rot = EpochRotations {
+        left: &l,
+        rel: &r,
+        right: &right,
+    };
+    project_epoch(
+        &rot,
+        &left.centre,
+        &rig.base,
+        camera,
+        focal_mm,
+        point,
+        Partials::PoseAndRig,
+    )
 }
 
 /// A rotation `M` and its derivatives by omega, phi, kappa, packed column-major
 /// (`[M, dM/dw, dM/dp, dM/dk]`, 9 values each) so a window can cache them per
 /// epoch: the sines and matrix products cost more than the projection itself.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(transparent)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Rotations(pub [f64; 36]);
 
 impl Rotations {
@@ -186,21 +201,50 @@ pub fn project_xy(
     Some([-focal_mm * u / w, -focal_mm * v / w])
 }
 
-/// [`project_rig`] with precomputed rotations of the left camera and the rig.
+/// Which partial derivatives a projection computes: the point's always (the point
+/// blocks and the tests of the observations need no more), the pose's and the rig's
+/// when camera blocks are built from them. Those not asked for are left at zero.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Partials {
+    Point,
+    Pose,
+    PoseAndRig,
+}
+
+/// An epoch's rotations as a projection uses them: the left camera's [`Rotations`],
+/// the rig's, and the right camera's rotation `M_rel M_left` (column-major), which
+/// a window caches per epoch rather than multiply it out for every observation.
+#[derive(Debug, Clone, Copy)]
+pub struct EpochRotations<'r> {
+    pub left: &'r Rotations,
+    pub rel: &'r Rotations,
+    pub right: &'r [f64; 9],
+}
+
+/// `M_rel M_left` of [`EpochRotations::right`].
+pub fn right_rotation(left: &Rotations, rel: &Rotations) -> [f64; 9] {
+    let mut out = [0.0; 9];
+    out.copy_from_slice((rel.get(0) * left.get(0)).as_slice());
+    out
+}
+
+/// [`project_rig`] with an epoch's rotations precomputed ([`EpochRotations`]).
 #[inline]
-pub fn project_with(
-    left: &Rotations,
+pub fn project_epoch(
+    rot: &EpochRotations,
     centre: &[f64; 3],
-    rel: &Rotations,
     base: &[f64; 3],
     camera: Camera,
     focal_mm: f64,
     point: &[f64; 3],
+    partials: Partials,
 ) -> Result<RigProjection, CameraError> {
+    let (left, rel) = (rot.left, rot.rel);
     let ml = left.get(0);
-    let dml = [left.get(1), left.get(2), left.get(3)];
     let d = Vector3::from(*point) - Vector3::from(*centre);
     let q = ml * d;
+    let angles = partials >= Partials::Pose;
+    let dml = |k: usize| left.get(k + 1) * d;
     // Camera-frame point, its derivatives w.r.t. pose angles, centre/point (3x3), rig.
     let (qc, dq_ang, dq_point, dq_rig): (
         Vector3<f64>,
@@ -210,26 +254,38 @@ pub fn project_with(
     ) = match camera {
         Camera::Left => (
             q,
-            [dml[0] * d, dml[1] * d, dml[2] * d],
+            if angles {
+                [dml(0), dml(1), dml(2)]
+            } else {
+                [Vector3::zeros(); 3]
+            },
             ml,
             [Vector3::zeros(); 6],
         ),
         Camera::Right => {
             let mr = rel.get(0);
-            let dmr = [rel.get(1), rel.get(2), rel.get(3)];
             let qb = q - Vector3::from(*base);
-            (
-                mr * qb,
-                [mr * (dml[0] * d), mr * (dml[1] * d), mr * (dml[2] * d)],
-                mr * ml,
+            let dq_rig = if partials == Partials::PoseAndRig {
                 [
-                    dmr[0] * qb,
-                    dmr[1] * qb,
-                    dmr[2] * qb,
+                    rel.get(1) * qb,
+                    rel.get(2) * qb,
+                    rel.get(3) * qb,
                     -mr.column(0).into_owned(),
                     -mr.column(1).into_owned(),
                     -mr.column(2).into_owned(),
-                ],
+                ]
+            } else {
+                [Vector3::zeros(); 6]
+            };
+            (
+                mr * qb,
+                if angles {
+                    [mr * dml(0), mr * dml(1), mr * dml(2)]
+                } else {
+                    [Vector3::zeros(); 3]
+                },
+                Matrix3::from_column_slice(rot.right),
+                dq_rig,
             )
         }
     };
@@ -249,15 +305,17 @@ pub fn project_with(
         d_interior: [[0.0; 6]; 2],
     };
     for a in 0..3 {
-        out.d_pose[0][a] = gx.dot(&dq_ang[a]);
-        out.d_pose[1][a] = gy.dot(&dq_ang[a]);
+        if angles {
+            out.d_pose[0][a] = gx.dot(&dq_ang[a]);
+            out.d_pose[1][a] = gy.dot(&dq_ang[a]);
+        }
         let col = dq_point.column(a).into_owned();
         out.d_point[0][a] = gx.dot(&col);
         out.d_point[1][a] = gy.dot(&col);
         out.d_pose[0][3 + a] = -out.d_point[0][a];
         out.d_pose[1][3 + a] = -out.d_point[1][a];
     }
-    if camera == Camera::Right {
+    if camera == Camera::Right && partials == Partials::PoseAndRig {
         for (j, dq) in dq_rig.iter().enumerate() {
             out.d_rig[0][j] = gx.dot(dq);
             out.d_rig[1][j] = gy.dot(dq);

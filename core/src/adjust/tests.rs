@@ -158,6 +158,47 @@ fn rig_projection_jacobians_match_central_differences() {
 }
 
 #[test]
+fn fewer_partials_give_the_same_projection_and_point_partials() {
+    use super::geometry::{project_epoch, right_rotation, EpochRotations, Partials, Rotations};
+    let left = Pose::from_params(&[1.55, 0.04, -0.1, 0.3, -0.2, 1.1]);
+    let rig = RigParams {
+        angles: [0.01, -0.02, 0.005],
+        base: [0.5, 0.01, -0.02],
+    };
+    let (l, r) = (
+        Rotations::new(left.omega, left.phi, left.kappa),
+        Rotations::new(rig.angles[0], rig.angles[1], rig.angles[2]),
+    );
+    let right = right_rotation(&l, &r);
+    let rot = EpochRotations {
+        left: &l,
+        rel: &r,
+        right: &right,
+    };
+    let m = left.rotation();
+    let pw = left.centre_vec() + m.transpose() * nalgebra::Vector3::new(0.7, -0.4, -12.0);
+    let point = [pw[0], pw[1], pw[2]];
+    for cam in [Camera::Left, Camera::Right] {
+        let full = project_rig(&left, &rig, cam, 8.0, &point).unwrap();
+        let at = |p| project_epoch(&rot, &left.centre, &rig.base, cam, 8.0, &point, p).unwrap();
+        assert_eq!(at(Partials::PoseAndRig), full, "{cam:?}");
+        let pose = at(Partials::Pose);
+        assert_eq!(
+            (pose.xy, pose.d_point, pose.d_pose),
+            (full.xy, full.d_point, full.d_pose)
+        );
+        assert_eq!(pose.d_rig, [[0.0; 6]; 2]);
+        let point_only = at(Partials::Point);
+        assert_eq!((point_only.xy, point_only.d_point), (full.xy, full.d_point));
+        for c in 0..2 {
+            assert_eq!(point_only.d_pose[c][..3], [0.0; 3]);
+            // The centre's partials are the point's, negated: free with the point's.
+            assert_eq!(point_only.d_pose[c][3..], full.d_pose[c][3..]);
+        }
+    }
+}
+
+#[test]
 fn constraint_jacobians_match_central_differences() {
     let mut rng = Rng(5);
     let h = 1e-7;

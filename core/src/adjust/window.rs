@@ -24,8 +24,8 @@
 use super::cholesky;
 use super::constraints::{base_length, distance, prior_residual, smoothness};
 use super::geometry::{
-    corrected_focal, project_rig, project_with, project_xy, shift_principal_point, with_interior,
-    Camera, InteriorCorrections, RigParams, Rotations,
+    corrected_focal, project_epoch, project_rig, project_xy, right_rotation, shift_principal_point,
+    with_interior, Camera, EpochRotations, InteriorCorrections, Partials, RigParams, Rotations,
 };
 use super::quality::ChiSquareTest;
 use super::weighting::{cauchy_factor, median_by_rank, CHI2_2_MEDIAN, SEED_REWEIGHT};
@@ -356,8 +356,10 @@ struct EpochSlot {
     odometer: f64,
     odometer_sigma: f64,
     time: f64,
-    /// Cached rotation and derivatives of `params` (see [`Rotations`]).
-    rot: [f64; 36],
+    /// Cached rotation and derivatives of `params`.
+    rot: Rotations,
+    /// Cached right camera rotation ([`EpochRotations::right`]).
+    right: [f64; 9],
     id: u32,
     flags: u32,
 }
@@ -396,8 +398,10 @@ const PT_EXCLUDED: u32 = 4;
 struct FixedSlot {
     /// Local parameters (the window's origin), as the epoch left the window.
     params: [f64; 6],
-    /// Cached rotation and derivatives of `params` (see [`Rotations`]).
-    rot: [f64; 36],
+    /// Cached rotation and derivatives of `params`.
+    rot: Rotations,
+    /// Cached right camera rotation ([`EpochRotations::right`]).
+    right: [f64; 9],
 }
 
 /// Where an observation's epoch is: a window slot (adjusted) or a fixed slot.
@@ -511,6 +515,9 @@ pub struct Window<'a> {
     calibration_active: bool,
     /// They are held at their values ([`AdjustConfig::hold_calibration`]).
     calibration_held: bool,
+    /// The held calibration's blocks are being built for its score test: the only
+    /// build that needs them (the others wipe them in [`Self::hold_blocks`]).
+    testing_calibration: bool,
 }
 
 impl AdjustConfig {
@@ -698,6 +705,7 @@ impl<'a> Window<'a> {
             singular_epoch: None,
             calibration_active: true,
             calibration_held: cfg.hold_calibration,
+            testing_calibration: false,
         })
     }
 
@@ -770,12 +778,23 @@ impl<'a> Window<'a> {
     }
 
     /// Cached rotations and local centre of the pose at `at`.
-    fn pose_parts(&self, at: At) -> (Rotations, [f64; 3]) {
-        let (rot, p) = match at {
-            At::Window(s) => (&self.epochs[s].rot, &self.epochs[s].params),
-            At::Fixed(s) => (&self.fixed[s].rot, &self.fixed[s].params),
+    fn pose_parts(&self, at: At) -> (EpochRotations<'_>, [f64; 3]) {
+        let (rot, right, p) = match at {
+            At::Window(s) => {
+                let e = &self.epochs[s];
+                (&e.rot, &e.right, &e.params)
+            }
+            At::Fixed(s) => {
+                let e = &self.fixed[s];
+                (&e.rot, &e.right, &e.params)
+            }
         };
-        (Rotations(*rot), [p[3], p[4], p[5]])
+        let rot = EpochRotations {
+            left: rot,
+            rel: &self.rig_rot,
+            right,
+        };
+        (rot, [p[3], p[4], p[5]])
     }
 
     /// Local parameters of the pose at `at`.
@@ -1115,9 +1134,11 @@ impl<'a> Window<'a> {
             Some(gone)
         } else {
             let e = &self.epochs[0];
+            let rot = Rotations::new(e.params[0], e.params[1], e.params[2]);
             let slot = FixedSlot {
                 params: e.params,
-                rot: Rotations::new(e.params[0], e.params[1], e.params[2]).0,
+                rot,
+                right: right_rotation(&rot, &self.rig_rot),
             };
             let expired = (self.n_fixed == cap).then(|| gone.wrapping_sub(cap as u32));
             if self.n_fixed == cap {
@@ -1274,6 +1295,16 @@ impl<'a> Window<'a> {
             + self.interior_block().is_some() as usize)
     }
 
+    /// The rig and interior blocks a build accumulates: none for a held calibration
+    /// except in its score test, since [`Self::hold_blocks`] wipes them.
+    fn built_blocks(&self) -> (Option<usize>, Option<usize>) {
+        if self.calibration_held && !self.testing_calibration {
+            (None, None)
+        } else {
+            (self.rig_block(), self.interior_block())
+        }
+    }
+
     /// With the calibration held, takes the rig and interior blocks out of the reduced
     /// system just built (unit diagonal, no coupling, zero right-hand side): the poses
     /// are solved as with a fixed calibration and the held blocks' step is zero.
@@ -1313,27 +1344,33 @@ impl<'a> Window<'a> {
         }
     }
 
-    /// Projection through the cached rotations of epoch `slot` and the rig.
+    /// Projection through the cached rotations of epoch `slot` and the rig, with the
+    /// `partials` the caller uses.
     #[inline]
     fn project(
         &self,
         at: At,
         cam: Camera,
         xyz: &[f64; 3],
+        partials: Partials,
     ) -> Result<super::geometry::RigProjection, crate::camera::CameraError> {
         let (rot, c) = self.pose_parts(at);
         let f = corrected_focal(self.focal, cam, &self.interior);
-        let pr = project_with(&rot, &c, &self.rig_rot, &self.rig.base, cam, f, xyz)?;
+        let pr = project_epoch(&rot, &c, &self.rig.base, cam, f, xyz, partials)?;
         Ok(with_interior(pr, cam, f, &self.interior))
     }
 
     /// Recomputes the cached rotations after the parameters changed.
     fn refresh_rotations(&mut self) {
-        for e in self.epochs[..self.n_epochs].iter_mut() {
-            e.rot = Rotations::new(e.params[0], e.params[1], e.params[2]).0;
-        }
         let a = self.rig.angles;
         self.rig_rot = Rotations::new(a[0], a[1], a[2]);
+        for e in self.epochs[..self.n_epochs].iter_mut() {
+            e.rot = Rotations::new(e.params[0], e.params[1], e.params[2]);
+            e.right = right_rotation(&e.rot, &self.rig_rot);
+        }
+        for e in self.fixed[..self.n_fixed].iter_mut() {
+            e.right = right_rotation(&e.rot, &self.rig_rot);
+        }
     }
 
     /// Groups the observations by point (counting sort).
@@ -1383,8 +1420,7 @@ impl<'a> Window<'a> {
         let mut used = 0;
         let mut touched = 0usize;
         let xyz = self.points[p].xyz;
-        let rig_block = self.rig_block();
-        let interior_block = self.interior_block();
+        let (rig_block, interior_block) = self.built_blocks();
         let (s0, s1) = (
             self.point_start[p] as usize,
             self.point_start[p + 1] as usize,
@@ -1406,7 +1442,16 @@ impl<'a> Window<'a> {
             } else {
                 Camera::Right
             };
-            let pr = match self.project(at, cam, &xyz) {
+            // Camera blocks need the pose's partials (a window epoch) and the rig's
+            // (a right observation with the rig in the system); the point's always.
+            let on_rig = cam == Camera::Right && rig_block.is_some();
+            let partials = match (want_cam, at, on_rig) {
+                (false, _, _) => Partials::Point,
+                (true, _, true) => Partials::PoseAndRig,
+                (true, At::Window(_), false) => Partials::Pose,
+                (true, At::Fixed(_), false) => Partials::Point,
+            };
+            let pr = match self.project(at, cam, &xyz, partials) {
                 Ok(pr) => pr,
                 Err(_) => {
                     self.obs[oi].flags |= Observation::BEHIND;
@@ -1439,7 +1484,6 @@ impl<'a> Window<'a> {
                 At::Window(slot) => Some(slot),
                 At::Fixed(_) => None,
             };
-            let on_rig = cam == Camera::Right && rig_block.is_some();
             if slot.is_none() && !on_rig && interior_block.is_none() {
                 continue;
             }
@@ -1453,7 +1497,19 @@ impl<'a> Window<'a> {
                 if !self.touched[..touched].contains(&(sidx as u32)) {
                     self.touched[touched] = sidx as u32;
                     touched += 1;
-                    self.scratch[sidx] = BlockScratch::zeroed();
+                    // Only the parts this pass accumulates (the scratch is 1 KiB a block).
+                    let sc = &mut self.scratch[sidx];
+                    sc.w = [0.0; 18];
+                    if full {
+                        sc.g = [0.0; 6];
+                        sc.u = [0.0; 36];
+                        if rig_block.is_some() {
+                            sc.u_rig = [0.0; 36];
+                        }
+                        if interior_block.is_some() {
+                            sc.u_interior = [0.0; 36];
+                        }
+                    }
                 }
                 let sc = &mut self.scratch[sidx];
                 for c in 0..2 {
@@ -1546,8 +1602,7 @@ impl<'a> Window<'a> {
     fn build(&mut self, lambda: f64) {
         self.refresh_rotations();
         let nc = self.n_cam();
-        let rig_block = self.rig_block();
-        let interior_block = self.interior_block();
+        let (rig_block, interior_block) = self.built_blocks();
         self.reduced[..nc * nc].fill(0.0);
         self.rhs[..nc].fill(0.0);
         for p in 0..self.n_point_slots {
@@ -1561,7 +1616,11 @@ impl<'a> Window<'a> {
             for ti in 0..pb.touched {
                 let a = self.touched[ti] as usize;
                 let ba = self.block_of(a);
-                let sa = self.scratch[a];
+                let later = [
+                    rig_block.filter(|_| a < self.cfg.window),
+                    interior_block.filter(|_| a != self.interior_scratch()),
+                ];
+                let sa = &self.scratch[a];
                 // U, gradient, and the cross blocks with the rig and the interior.
                 for i in 0..6 {
                     self.rhs[6 * ba + i] += sa.g[i];
@@ -1571,14 +1630,7 @@ impl<'a> Window<'a> {
                 }
                 // Row (later block) param i, column (this block) param j: the
                 // transpose of J_this^T W J_other. Both later blocks follow the epochs.
-                let crosses = [
-                    (rig_block.filter(|_| a < self.cfg.window), &sa.u_rig),
-                    (
-                        interior_block.filter(|_| a != self.interior_scratch()),
-                        &sa.u_interior,
-                    ),
-                ];
-                for (later, cross) in crosses {
+                for (later, cross) in later.into_iter().zip([&sa.u_rig, &sa.u_interior]) {
                     let Some(lb) = later else { continue };
                     for i in 0..6 {
                         for j in 0..6 {
@@ -1832,7 +1884,7 @@ impl<'a> Window<'a> {
                 Camera::Right
             };
             let f = corrected_focal(self.focal, cam, &self.interior);
-            match project_xy(&rot, &c, &self.rig_rot, &self.rig.base, cam, f, &pt.xyz) {
+            match project_xy(rot.left, &c, &self.rig_rot, &self.rig.base, cam, f, &pt.xyz) {
                 Some(xy) => {
                     let xy = shift_principal_point(xy, cam, &self.interior);
                     let r = [o.xy[0] as f64 - xy[0], o.xy[1] as f64 - xy[1]];
@@ -2223,7 +2275,7 @@ impl<'a> Window<'a> {
             Camera::Right
         };
         let xyz = self.points[o.point as usize].xyz;
-        let Ok(pr) = self.project(at, cam, &xyz) else {
+        let Ok(pr) = self.project(at, cam, &xyz, Partials::Point) else {
             return f64::INFINITY;
         };
         let r = [o.xy[0] as f64 - pr.xy[0], o.xy[1] as f64 - pr.xy[1]];
@@ -2420,7 +2472,9 @@ impl<'a> Window<'a> {
             return Err(AdjustError::InvalidConfig);
         }
         self.build_index();
+        self.testing_calibration = true;
         self.build(0.0);
+        self.testing_calibration = false;
         let mut g = [0.0; 12];
         g[..nc - first].copy_from_slice(&self.rhs[first..nc]);
         cholesky::factor(&mut self.reduced[..nc * nc], nc, cholesky::PIVOT_REL_TOL).map_err(
@@ -2483,7 +2537,7 @@ impl<'a> Window<'a> {
             };
             let project = |rig: &RigParams, rig_rot: &Rotations, interior: &InteriorCorrections| {
                 let f = corrected_focal(self.focal, cam, interior);
-                project_xy(&rot, &c, rig_rot, &rig.base, cam, f, &pt.xyz)
+                project_xy(rot.left, &c, rig_rot, &rig.base, cam, f, &pt.xyz)
                     .map(|xy| shift_principal_point(xy, cam, interior))
             };
             let before = project(&self.rig, &self.rig_rot, &self.interior);
