@@ -221,7 +221,23 @@ def common_fields(ev, epochs, cpu_s, wall_s):
     }
 
 
-def run_scene(binary, cache, scene, frames, split=False):
+def run_baseline(baseline, ds, runs, scene, frames):
+    """Another build of phototraverse (an earlier commit) on the same dataset with the same
+    options, right after ours: its CPU per epoch and drift, for the time bar "within 1.2x
+    of an earlier version" measured in one run whatever the machine's speed."""
+    out = os.path.join(runs, "baseline")
+    shutil.rmtree(out, ignore_errors=True)
+    print(f"[{scene}] baseline: {baseline} run ...", flush=True)
+    wall, cpu = run_timed([baseline, "run", ds, "--out", out, "--link", "inproc", "--quiet",
+                           *ours_args(scene)], os.path.join(runs, "baseline.log"))
+    ev = evaluate(baseline, ds, os.path.join(out, "poses.txt"),
+                  os.path.join(runs, "baseline_eval.json"), os.path.join(runs, "baseline_eval.log"))
+    return {"process_cpu_ms_per_epoch": cpu * 1e3 / frames, "process_wall_s": wall,
+            "translation_pct": ev["translation_drift_pct"],
+            "rotation_deg_per_m": ev["rotation_drift_deg_per_m"]}
+
+
+def run_scene(binary, cache, scene, frames, split=False, baseline=None):
     ds, synth_wall = synthesize(binary, cache, dataset_of(scene), frames)
     runs = os.path.join(cache, "runs", f"{scene}-{frames}")
     ours_dir, peer_dir = os.path.join(runs, "ours"), os.path.join(runs, "peer")
@@ -282,6 +298,12 @@ def run_scene(binary, cache, scene, frames, split=False):
         },
         "synth_wall_s": synth_wall,
     }
+    if baseline:
+        try:
+            result["baseline"] = run_baseline(baseline, ds, runs, scene, len(oe))
+        except RuntimeError as e:
+            # An older build may refuse a newer configuration (the embedded profile).
+            print(f"[{scene}] baseline left out: {str(e).splitlines()[-1]}", flush=True)
     if split:
         print(f"[{scene}] ours: CPU split (--fw-processor stats, sift) ...", flush=True)
         result["ours"]["cpu_split_ms"] = cpu_split(
@@ -319,6 +341,28 @@ def table(results):
             f"{ratio(o['translation_pct'], p['translation_pct']):.2f} | "
             f"{ratio(o['rotation_deg_per_m'], p['rotation_deg_per_m']):.2f} | "
             f"{ratio(o['ms'], p['ms']):.2f} | {ratio(oc, pc):.2f} |")
+    if any("baseline" in r for r in results):
+        lines += ["", baseline_table(results)]
+    return "\n".join(lines)
+
+
+def baseline_table(results):
+    """Our CPU per epoch against the baseline build's (`--baseline-bin`), both also
+    against the peer's, and the baseline's drift."""
+    lines = [
+        "| scene | ours CPU ms/epoch | baseline CPU ms/epoch | CPU ours/baseline "
+        "| CPU ours/peer | CPU baseline/peer | baseline drift % | baseline deg/m |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for r in results:
+        if "baseline" not in r:
+            continue
+        b = r["baseline"]
+        oc, bc = r["ours"]["process_cpu_ms_per_epoch"], b["process_cpu_ms_per_epoch"]
+        pc = r["peer"]["process_cpu_ms_per_epoch"]
+        lines.append(
+            f"| {r['scene']} | {oc:.1f} | {bc:.1f} | {ratio(oc, bc):.2f} | {ratio(oc, pc):.2f} "
+            f"| {ratio(bc, pc):.2f} | {b['translation_pct']:.3f} | {b['rotation_deg_per_m']:.4f} |")
     return "\n".join(lines)
 
 
@@ -409,6 +453,9 @@ def main():
     ap.add_argument("--cpu-split", action="store_true",
                     help="also split our CPU per epoch into host, SIFT and the rest (2 more runs)")
     ap.add_argument("--bin", default=os.path.join(REPO, "target", "release", "phototraverse"))
+    ap.add_argument("--baseline-bin", metavar="PATH",
+                    help="another phototraverse build (say, of an earlier commit) run on the "
+                         "same scenes after ours: its CPU per epoch and drift beside ours")
     ap.add_argument("--results", default=os.path.join(HERE, "RESULTS.md"),
                     help="markdown file written with the table ('-' to skip)")
     args = ap.parse_args()
@@ -422,11 +469,13 @@ def main():
         ap.error(f"{', '.join(photos)} need the photographs {', '.join(missing)}")
     if not os.access(args.bin, os.X_OK):
         ap.error(f"{args.bin}: no binary (cargo build --release -p phototraverse-host)")
+    if args.baseline_bin and not os.access(args.baseline_bin, os.X_OK):
+        ap.error(f"{args.baseline_bin}: not an executable")
     before = uptime()
     results = []
     for scene in scenes:
         frames = frames_of(scene, args.frames)
-        r = run_scene(args.bin, args.cache, scene, frames, args.cpu_split)
+        r = run_scene(args.bin, args.cache, scene, frames, args.cpu_split, args.baseline_bin)
         results.append(r)
         o, p = r["ours"], r["peer"]
         print(f"[{scene}] ours {o['translation_pct']:.3f} % {o['rotation_deg_per_m']:.4f} deg/m "
