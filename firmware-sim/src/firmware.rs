@@ -361,6 +361,24 @@ impl<Pr: EpochProcessor> Epochs<'_, '_, Pr> {
                 if b.camera == Camera::Left {
                     self.started_us = self.clock.now_us();
                 }
+                let expected = self.processor.frame_size(b.camera.index());
+                if let Some((w, h)) = expected.filter(|&s| s != (b.width, b.height)) {
+                    // Refused before its chunks arrive: the rest of the epoch is ignored.
+                    self.frames[b.camera.index()].refuse(b.epoch);
+                    return self
+                        .lose(
+                            tx,
+                            port,
+                            b.epoch,
+                            ErrorCode::FrameSize,
+                            seq,
+                            format_args!(
+                                "{:?} frame is {}x{}, the configured camera's width_px x height_px is {w}x{h}",
+                                b.camera, b.width, b.height
+                            ),
+                        )
+                        .map(|_| Flow::Continue);
+                }
                 match self.frames[b.camera.index()].begin(b) {
                     Ok(Some(abandoned)) => self.lose(
                         tx,

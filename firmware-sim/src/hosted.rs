@@ -27,7 +27,8 @@ use std::time::Instant;
 
 const USAGE: &str = "usage: phototraverse-firmware-sim [--tcp ADDR | --serial DEV [--baud N]] \
 [--memory BYTES] [--max-width W] [--max-height H] [--processor traverse|sift|stats] \
-[--die-after-bytes N (fault injection: the process exits after reading N bytes)]";
+[--die-after-bytes N (fault injection: the process exits after reading N bytes)] \
+[--stop-after-bytes N (fault injection: the process stops itself, SIGSTOP, after reading N bytes)]";
 
 struct Options {
     tcp: Option<String>,
@@ -37,8 +38,16 @@ struct Options {
     limits: Limits,
     /// Image statistics instead of SIFT (bring-up).
     processor: Processor,
-    /// Fault injection for tests: exit abruptly once this many bytes were read.
-    die_after_bytes: Option<u64>,
+    /// Fault injection for tests: exit abruptly, or stop (a hung firmware), once this
+    /// many bytes were read.
+    fault_after_bytes: Option<(u64, Fault)>,
+}
+
+/// What an injected fault does to the process.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Fault {
+    Exit,
+    Stop,
 }
 
 fn parse_args(argv: Vec<String>) -> Result<Options, String> {
@@ -49,7 +58,7 @@ fn parse_args(argv: Vec<String>) -> Result<Options, String> {
         memory: 32 << 20,
         limits: Limits::default(),
         processor: Processor::Traverse,
-        die_after_bytes: None,
+        fault_after_bytes: None,
     };
     let mut args = argv.into_iter();
     while let Some(a) = args.next() {
@@ -80,12 +89,14 @@ fn parse_args(argv: Vec<String>) -> Result<Options, String> {
                     }
                 }
             }
-            "--die-after-bytes" => {
-                o.die_after_bytes = Some(
-                    value()?
-                        .parse()
-                        .map_err(|e| format!("--die-after-bytes: {e}"))?,
-                )
+            "--die-after-bytes" | "--stop-after-bytes" => {
+                let n = value()?.parse().map_err(|e| format!("{a}: {e}"))?;
+                let fault = if a == "--die-after-bytes" {
+                    Fault::Exit
+                } else {
+                    Fault::Stop
+                };
+                o.fault_after_bytes = Some((n, fault));
             }
             "-h" | "--help" => return Err(USAGE.to_string()),
             other => return Err(format!("unknown argument {other}\n{USAGE}")),
@@ -99,8 +110,8 @@ fn parse_args(argv: Vec<String>) -> Result<Options, String> {
 struct Port<R, W> {
     rx: R,
     tx: W,
-    /// Bytes left before the injected crash, if one is configured.
-    die_after: Option<u64>,
+    /// Bytes left before the injected fault, if one is configured.
+    fault_after: Option<(u64, Fault)>,
 }
 
 impl<R, W> embedded_io::ErrorType for Port<R, W> {
@@ -110,18 +121,18 @@ impl<R, W> embedded_io::ErrorType for Port<R, W> {
 impl<R: Read, W> embedded_io::Read for Port<R, W> {
     fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
         loop {
-            let n = match self.die_after {
-                // Never read past the crash point: what follows it is never seen.
-                Some(left) => buf.len().min(left.max(1) as usize),
+            let n = match self.fault_after {
+                // Never read past the fault: what follows it is never seen.
+                Some((left, _)) => buf.len().min(left.max(1) as usize),
                 None => buf.len(),
             };
             let buf = &mut buf[..n];
             let got = self.rx.read(buf);
-            if let (Ok(k), Some(left)) = (&got, self.die_after.as_mut()) {
+            if let (Ok(k), Some((left, fault))) = (&got, self.fault_after.as_mut()) {
                 *left = left.saturating_sub(*k as u64);
                 if *left == 0 {
-                    eprintln!("phototraverse-firmware-sim: injected fault: exiting after the configured bytes");
-                    std::process::exit(3);
+                    inject(*fault);
+                    self.fault_after = None;
                 }
             }
             match got {
@@ -147,6 +158,27 @@ impl<R, W: Write> embedded_io::Write for Port<R, W> {
     }
 }
 
+/// The injected fault: the process exits, or stops itself as a hung firmware would.
+fn inject(fault: Fault) {
+    match fault {
+        Fault::Exit => {
+            eprintln!(
+                "phototraverse-firmware-sim: injected fault: exiting after the configured bytes"
+            );
+            std::process::exit(3);
+        }
+        Fault::Stop => {
+            eprintln!(
+                "phototraverse-firmware-sim: injected fault: stopping after the configured bytes"
+            );
+            // SAFETY: raise only sends a signal to this process; SIGSTOP cannot be caught.
+            unsafe {
+                libc::raise(libc::SIGSTOP);
+            }
+        }
+    }
+}
+
 struct StdClock(Instant);
 
 impl Clock for StdClock {
@@ -161,7 +193,7 @@ fn serve<R: Read, W: Write>(o: &Options, rx: R, tx: W) -> std::io::Result<()> {
     let mut port = Port {
         rx,
         tx,
-        die_after: o.die_after_bytes,
+        fault_after: o.fault_after_bytes,
     };
     let clock = StdClock(Instant::now());
     match o.processor {

@@ -33,6 +33,12 @@ pub struct EpochOutput {
 pub trait EpochProcessor {
     fn process(&mut self, input: &EpochInput, clock: &dyn Clock) -> EpochOutput;
 
+    /// The frame size (width, height in pixels) the processor was configured for, per
+    /// camera (0 left, 1 right); `None` takes any size up to the configured capacity.
+    fn frame_size(&self, _camera: usize) -> Option<(u16, u16)> {
+        None
+    }
+
     /// Fills `msg` (within `max_payload` bytes) with the next records of the
     /// tie point report: points and observations that became final since the
     /// last report; `flush` (the sequence ended) makes the whole window final.

@@ -163,6 +163,16 @@ fn aux_of(input: &EpochInput) -> AuxObservations {
 }
 
 impl EpochProcessor for TraverseProcessor<'_> {
+    fn frame_size(&self, camera: usize) -> Option<(u16, u16)> {
+        let rig = &self.traverse.config().rig;
+        let c = if camera == 0 { &rig.left } else { &rig.right };
+        // The configuration refuses cameras wider or taller than a u16 frame field.
+        Some((
+            u16::try_from(c.width_px).ok()?,
+            u16::try_from(c.height_px).ok()?,
+        ))
+    }
+
     fn points(&mut self, flush: bool, max_payload: usize, msg: &mut Points) -> bool {
         self.report.flushing |= flush;
         self.fill_points(max_payload, msg)

@@ -94,13 +94,15 @@ pub fn run_dataset(ds: &Dataset, out: &Path, opts: &RunOptions) -> Result<RunOut
             }
         }
     }
-    run.report.link = serde_json::to_value(session.link_stats()).ok();
+    let link = session.link_stats();
+    run.report.link = serde_json::to_value(&link).ok();
     let outcome = run.finish(&session)?;
     match failure {
         Some(e) => Err(e.context(format!(
-            "run stopped; the poses of the {} epochs processed are in {}",
+            "run stopped; the outputs of the {} epochs processed are in {} (link: {})",
             outcome.report.epochs.len(),
-            out.join("poses.txt").display()
+            out.display(),
+            link.summary()
         ))),
         None => Ok(outcome),
     }

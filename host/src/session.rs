@@ -118,6 +118,25 @@ pub struct LinkStats {
     pub faults: Option<[FaultCounters; 2]>,
 }
 
+impl LinkStats {
+    /// One line for people: what the link did, to say why a run stopped.
+    pub fn summary(&self) -> String {
+        format!(
+            "{} packets sent ({} retransmitted, {} retransmission time-outs, {} NACKs received), \
+             {} received ({} CRC errors, {} framing errors, {} oversized, {} gaps)",
+            self.packets_sent,
+            self.retransmitted_packets,
+            self.retransmission_timeouts,
+            self.nacks_received,
+            self.packets_received,
+            self.crc_errors,
+            self.framing_errors,
+            self.oversized,
+            self.gaps,
+        )
+    }
+}
+
 /// Why a session call failed.
 /// MORE answers without a point before [`Session::pull_points`] gives up.
 const MAX_EMPTY_POINTS_ROUNDS: u32 = 8;
@@ -264,8 +283,9 @@ pub struct Session<T: Transport> {
 
 impl<T: Transport> Session<T> {
     /// Says hello and waits for the firmware's capabilities.
-    pub fn open(t: T, opts: SessionOptions) -> Result<Self, SessionError> {
+    pub fn open(mut t: T, opts: SessionOptions) -> Result<Self, SessionError> {
         let now = Instant::now();
+        t.set_write_deadline(opts.timeout);
         let chunk = opts.chunk.clamp(1, MAX_PAYLOAD - CHUNK_HEADER_LEN);
         let mut rto = opts.rto;
         if let Some(rate) = t.bytes_per_sec() {
@@ -625,14 +645,8 @@ impl<T: Transport> Session<T> {
                 return Ok(());
             }
             self.service(Duration::from_millis(20).min(self.rto))?;
+            self.check_silence(what)?;
             let silent = self.last_heard.elapsed();
-            if silent > self.opts.timeout {
-                return Err(SessionError::Timeout {
-                    secs: silent.as_secs_f64(),
-                    link: self.t.describe(),
-                    what: what.to_string(),
-                });
-            }
             if silent > self.backoff && last_nudge.elapsed() > self.backoff {
                 // Our window may be fine while an answer of the firmware was lost:
                 // ask it to resend from what we expect.
@@ -645,6 +659,20 @@ impl<T: Transport> Session<T> {
                 self.link.nacks_sent += 1;
             }
         }
+    }
+
+    /// A firmware silent for longer than the link time-out is unresponsive, whatever
+    /// the host was waiting for (`what`, for the message).
+    fn check_silence(&self, what: &str) -> Result<(), SessionError> {
+        let silent = self.last_heard.elapsed();
+        if silent > self.opts.timeout {
+            return Err(SessionError::Timeout {
+                secs: silent.as_secs_f64(),
+                link: self.t.describe(),
+                what: what.to_string(),
+            });
+        }
+        Ok(())
     }
 
     fn write(&mut self, bytes: &[u8]) -> Result<(), SessionError> {
@@ -661,15 +689,14 @@ impl<T: Transport> Session<T> {
         Ok(())
     }
 
+    /// Flushes the transport; also when nothing is buffered, so a transport whose
+    /// writes are blocked reports it (see [`Transport::set_write_deadline`]).
     fn flush(&mut self) -> Result<(), SessionError> {
-        if self.unflushed > 0 {
-            self.unflushed = 0;
-            self.t.flush().map_err(|error| SessionError::Io {
-                link: self.t.describe(),
-                error,
-            })?;
-        }
-        Ok(())
+        self.unflushed = 0;
+        self.t.flush().map_err(|error| SessionError::Io {
+            link: self.t.describe(),
+            error,
+        })
     }
 
     /// The framed bytes of `msg` with sequence number `seq`.

@@ -346,7 +346,7 @@ fn a_firmware_that_dies_keeps_the_poses_processed() {
     let kept = lines(&out.join("poses.txt"));
     assert!((1..FRAMES).contains(&kept), "{kept} poses kept");
     assert!(
-        e.contains(&format!("the poses of the {kept} epochs processed")),
+        e.contains(&format!("the outputs of the {kept} epochs processed")),
         "{e}"
     );
     // The other outputs cover the same epochs.
@@ -355,6 +355,51 @@ fn a_firmware_that_dies_keeps_the_poses_processed() {
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(report["epochs"].as_array().unwrap().len(), kept);
     assert!(out.join("report.html").is_file() && out.join("points.ply").is_file());
+}
+
+#[cfg(unix)]
+#[test]
+fn a_stopped_firmware_ends_the_run_within_the_link_timeout() {
+    use std::os::unix::fs::PermissionsExt;
+    let t = tempfile::tempdir().unwrap();
+    // A firmware that hangs (SIGSTOP) after ~3.5 epochs of input: it neither reads nor
+    // answers, so the host's writes fill the pipe and its reads stay silent.
+    let script = t.path().join("hanging-firmware.sh");
+    std::fs::write(
+        &script,
+        format!(
+            "#!/bin/sh\nexec '{}' firmware --stop-after-bytes 2200000 \"$@\"\n",
+            env!("CARGO_BIN_EXE_phototraverse")
+        ),
+    )
+    .unwrap();
+    std::fs::set_permissions(&script, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let out = t.path().join("r");
+    let start = std::time::Instant::now();
+    let o = run(
+        sequence(),
+        &out,
+        &["--link", "child", "--link-timeout", "2"],
+        &[("PHOTOTRAVERSE_FIRMWARE", &script)],
+    );
+    let took = start.elapsed().as_secs_f64();
+    assert!(!o.status.success());
+    let e = text(&o.stderr);
+    assert!(
+        e.contains("run stopped")
+            && (e.contains("stopped or stalled") || e.contains("did not answer")),
+        "{e}"
+    );
+    assert!(e.contains("packets sent"), "the link's figures: {e}");
+    let kept = lines(&out.join("poses.txt"));
+    assert!((1..FRAMES).contains(&kept), "{kept} poses kept");
+    assert!(
+        e.contains(&format!("the outputs of the {kept} epochs processed")),
+        "{e}"
+    );
+    assert!(out.join("report.json").is_file() && out.join("eop.csv").is_file());
+    // The time-out, plus the epochs processed before the stop and start-up; not a hang.
+    assert!(took < 60.0, "{took:.1} s");
 }
 
 /// On the wire, each observation and each point is reported exactly once: the

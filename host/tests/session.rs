@@ -482,6 +482,38 @@ fn bad_input_is_refused_clearly_and_the_session_goes_on() {
 }
 
 /// A link whose firmware never answers.
+#[test]
+fn a_frame_of_another_size_than_the_cameras_is_refused_naming_the_field() {
+    // The traverse expects the rig's W x H; a smaller frame fits the capacity, but
+    // orienting it with the rig's interior orientation would be wrong.
+    let t = InProc::spawn(32 << 20, Default::default(), FirmwareProcessor::Traverse);
+    let mut s = Session::open(t, SessionOptions::default()).unwrap();
+    s.configure(&config(W, H)).unwrap();
+    let (w, h) = (W - 32, H - 16);
+    let (l, r) = (image(0, 0, w, h), image(0, 1, w, h));
+    let f = EpochFrames {
+        epoch: 0,
+        timestamp_us: 0,
+        width: w,
+        height: h,
+        format: PixelFormat::Gray8,
+        left: &l,
+        right: &r,
+        aux: None,
+    };
+    s.send_epoch(&f).unwrap();
+    let text = wait_for_error(&mut s, ErrorCode::FrameSize);
+    assert!(
+        text.contains("Left frame is 96x80") && text.contains("width_px x height_px is 128x96"),
+        "{text}"
+    );
+    s.finish().unwrap();
+    assert_eq!(s.result(0).unwrap().status, status::LOST);
+    // One error for the epoch, not one per camera or chunk.
+    let n = s.errors().iter().filter(|e| e.code == "FrameSize").count();
+    assert_eq!(n, 1, "{:?}", s.errors());
+}
+
 struct Silent;
 
 impl Transport for Silent {

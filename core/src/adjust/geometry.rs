@@ -189,10 +189,26 @@ pub fn project_xy(
     focal_mm: f64,
     point: &[f64; 3],
 ) -> Option<[f64; 2]> {
-    let q = left.get(0) * (Vector3::from(*point) - Vector3::from(*centre));
+    let (ml, mr) = (left.get(0), rel.get(0));
+    project_xy_with(&ml, centre, &mr, base, camera, focal_mm, point)
+}
+
+/// [`project_xy`] with the rotation matrices alone (`M` of the left camera and of the
+/// rig, as [`crate::camera::rotation`] gives them: no derivatives needed).
+#[inline]
+pub fn project_xy_with(
+    ml: &Matrix3<f64>,
+    centre: &[f64; 3],
+    mr: &Matrix3<f64>,
+    base: &[f64; 3],
+    camera: Camera,
+    focal_mm: f64,
+    point: &[f64; 3],
+) -> Option<[f64; 2]> {
+    let q = ml * (Vector3::from(*point) - Vector3::from(*centre));
     let q = match camera {
         Camera::Left => q,
-        Camera::Right => rel.get(0) * (q - Vector3::from(*base)),
+        Camera::Right => mr * (q - Vector3::from(*base)),
     };
     let (u, v, w) = (q[0], q[1], q[2]);
     if !(w < -MIN_DEPTH) || !(u.is_finite() && v.is_finite()) {

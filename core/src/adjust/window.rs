@@ -24,8 +24,9 @@
 use super::cholesky;
 use super::constraints::{base_length, distance, prior_residual, smoothness};
 use super::geometry::{
-    corrected_focal, project_epoch, project_rig, project_xy, right_rotation, shift_principal_point,
-    with_interior, Camera, EpochRotations, InteriorCorrections, Partials, RigParams, Rotations,
+    corrected_focal, project_epoch, project_xy, project_xy_with, right_rotation,
+    shift_principal_point, with_interior, Camera, EpochRotations, InteriorCorrections, Partials,
+    RigParams, Rotations,
 };
 use super::quality::ChiSquareTest;
 use super::weighting::{cauchy_factor, median_by_rank, CHI2_2_MEDIAN, SEED_REWEIGHT};
@@ -1083,17 +1084,51 @@ impl<'a> Window<'a> {
     /// Residuals `observed - computed` (mm) of an observation at the current state.
     pub fn residual(&self, index: usize) -> Option<[f64; 2]> {
         let o = self.obs.get(index).filter(|_| index < self.n_obs)?;
-        let pose = Pose::from_params(&self.params_at(self.locate(o.epoch)?));
+        let at = self.locate(o.epoch)?;
+        let p = self.params_at(at);
+        let ml = crate::camera::rotation(p[0], p[1], p[2]);
+        self.residual_with(o, &ml, &p, &self.rig_rotation())
+    }
+
+    /// [`Self::residual`] of every observation in order: the rotations computed once
+    /// per epoch's run of observations rather than once per observation.
+    pub fn residuals(&self) -> impl Iterator<Item = Option<[f64; 2]>> + '_ {
+        let mr = self.rig_rotation();
+        let mut last: Option<(u32, Matrix3<f64>, [f64; 6])> = None;
+        self.obs[..self.n_obs].iter().map(move |o| {
+            let (ml, p) = match last {
+                Some((e, ml, p)) if e == o.epoch => (ml, p),
+                _ => {
+                    let p = self.params_at(self.locate(o.epoch)?);
+                    let ml = crate::camera::rotation(p[0], p[1], p[2]);
+                    last = Some((o.epoch, ml, p));
+                    (ml, p)
+                }
+            };
+            self.residual_with(o, &ml, &p, &mr)
+        })
+    }
+
+    /// The rig's relative rotation `M` from its current angles.
+    fn rig_rotation(&self) -> Matrix3<f64> {
+        let a = self.rig.angles;
+        crate::camera::rotation(a[0], a[1], a[2])
+    }
+
+    /// Residual of `o` with its epoch's rotation `ml` and parameters `p`, the rig's `mr`.
+    fn residual_with(
+        &self,
+        o: &Observation,
+        ml: &Matrix3<f64>,
+        p: &[f64; 6],
+        mr: &Matrix3<f64>,
+    ) -> Option<[f64; 2]> {
         let cam = Camera::from_index(o.camera)?;
-        let pr = project_rig(
-            &pose,
-            &self.rig,
-            cam,
-            corrected_focal(self.focal, cam, &self.interior),
-            &self.points[o.point as usize].xyz,
-        )
-        .ok()?;
-        let xy = shift_principal_point(pr.xy, cam, &self.interior);
+        let f = corrected_focal(self.focal, cam, &self.interior);
+        let point = &self.points[o.point as usize].xyz;
+        let centre = [p[3], p[4], p[5]];
+        let xy = project_xy_with(ml, &centre, mr, &self.rig.base, cam, f, point)?;
+        let xy = shift_principal_point(xy, cam, &self.interior);
         Some([o.xy[0] as f64 - xy[0], o.xy[1] as f64 - xy[1]])
     }
 

@@ -63,6 +63,12 @@ impl<'a> FrameAssembler<'a> {
         self.state = State::Idle;
     }
 
+    /// Refuses `epoch`'s frame (the receiver found it unusable at its FrameBegin): its
+    /// chunks and end are ignored as those of a failed frame.
+    pub fn refuse(&mut self, epoch: u32) {
+        self.state = State::Failed { epoch };
+    }
+
     /// Epoch being received, complete or failed, if any.
     pub fn epoch(&self) -> Option<u32> {
         match &self.state {

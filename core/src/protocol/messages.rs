@@ -1057,6 +1057,8 @@ pub enum ErrorCode {
     EpochIncomplete = 12,
     /// The processor failed.
     Processing = 13,
+    /// A frame whose width or height differs from the configured camera's.
+    FrameSize = 14,
     /// Anything else.
     Other = 0xFFFF,
 }
@@ -1078,6 +1080,7 @@ impl ErrorCode {
             11 => FrameCrc,
             12 => EpochIncomplete,
             13 => Processing,
+            14 => FrameSize,
             _ => Other,
         }
     }

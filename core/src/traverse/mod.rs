@@ -879,11 +879,12 @@ impl<'a> Traverse<'a> {
     fn rms_px(&self) -> f64 {
         let px = self.cfg.rig.left.pixel_size_mm;
         let (mut sum, mut n) = (0.0, 0usize);
-        for (i, o) in self.window.observations().iter().enumerate() {
+        let residuals = self.window.residuals();
+        for (o, r) in self.window.observations().iter().zip(residuals) {
             if o.is_flagged() {
                 continue;
             }
-            if let Some([vx, vy]) = self.window.residual(i) {
+            if let Some([vx, vy]) = r {
                 sum += (vx / px[0]) * (vx / px[0]) + (vy / px[1]) * (vy / px[1]);
                 n += 1;
             }

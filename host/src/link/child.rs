@@ -1,9 +1,9 @@
 //! The firmware as a child process: its stdin and stdout are the link.
-use super::transport::{Incoming, StreamTransport};
+use super::transport::StreamTransport;
 use anyhow::{bail, Context};
-use std::io::{BufRead, BufReader, BufWriter};
+use std::io::{BufRead, BufReader};
 use std::path::PathBuf;
-use std::process::{Child, ChildStdin, Command, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
 /// Name of the firmware binary.
@@ -82,7 +82,7 @@ impl Drop for ChildGuard {
 
 /// The child-process transport.
 pub struct ChildLink {
-    inner: StreamTransport<BufWriter<ChildStdin>>,
+    inner: StreamTransport,
     _child: ChildGuard,
 }
 
@@ -99,11 +99,7 @@ impl ChildLink {
         let stdin = child.stdin.take().context("firmware stdin")?;
         let stdout = child.stdout.take().context("firmware stdout")?;
         Ok(ChildLink {
-            inner: StreamTransport {
-                writer: BufWriter::with_capacity(64 * 1024, stdin),
-                incoming: Incoming::spawn(stdout, "child"),
-                name: format!("child process {bin}"),
-            },
+            inner: StreamTransport::spawn(stdin, stdout, "child", format!("child process {bin}")),
             _child: ChildGuard(child),
         })
     }

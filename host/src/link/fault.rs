@@ -182,6 +182,9 @@ impl<T: Transport> Transport for Faulty<T> {
     fn bytes_per_sec(&self) -> Option<f64> {
         self.inner.bytes_per_sec()
     }
+    fn set_write_deadline(&mut self, deadline: Duration) {
+        self.inner.set_write_deadline(deadline)
+    }
     fn describe(&self) -> String {
         format!("{} with faults", self.inner.describe())
     }

@@ -104,7 +104,8 @@ pub struct LinkOptions {
     /// Frame payload bytes per chunk packet.
     #[arg(long, default_value_t = 1024)]
     pub chunk: usize,
-    /// Seconds without any answer before the firmware is declared unresponsive.
+    /// Seconds without any answer, or with a write blocked (a firmware that takes no
+    /// bytes), before the firmware is declared unresponsive and the run stops.
     #[arg(long, default_value_t = 5.0)]
     pub link_timeout: f64,
 }

@@ -1,14 +1,14 @@
 //! TCP and serial-port transports.
 use super::child::{spawn_tcp_firmware, ChildGuard};
-use super::transport::{Incoming, StreamTransport};
+use super::transport::StreamTransport;
 use anyhow::Context;
-use std::io::{self, BufWriter};
+use std::io;
 use std::net::TcpStream;
 use std::time::Duration;
 
 /// A TCP connection to a firmware (optionally one this link started).
 pub struct TcpLink {
-    inner: StreamTransport<BufWriter<TcpStream>>,
+    inner: StreamTransport,
     _child: Option<ChildGuard>,
 }
 
@@ -30,11 +30,7 @@ impl TcpLink {
         stream.set_nodelay(true)?;
         let reader = stream.try_clone()?;
         Ok(TcpLink {
-            inner: StreamTransport {
-                writer: BufWriter::with_capacity(64 * 1024, stream),
-                incoming: Incoming::spawn(reader, "tcp"),
-                name: format!("tcp {addr}"),
-            },
+            inner: StreamTransport::spawn(stream, reader, "tcp", format!("tcp {addr}")),
             _child: child,
         })
     }
@@ -44,7 +40,7 @@ super::transport::delegate_to_inner_stream!(TcpLink);
 
 /// A serial device (UART, USB CDC, pseudo-terminal) through the `serialport` crate.
 pub struct SerialLink {
-    inner: StreamTransport<Box<dyn serialport::SerialPort>>,
+    inner: StreamTransport,
 }
 
 impl SerialLink {
@@ -57,11 +53,12 @@ impl SerialLink {
             .try_clone()
             .context("cloning the serial port for reading")?;
         Ok(SerialLink {
-            inner: StreamTransport {
-                writer: port,
-                incoming: Incoming::spawn(reader, "serial"),
-                name: format!("serial {device} at {baud} baud"),
-            },
+            inner: StreamTransport::spawn(
+                port,
+                reader,
+                "serial",
+                format!("serial {device} at {baud} baud"),
+            ),
         })
     }
 }

@@ -45,6 +45,9 @@ impl<T: Transport> Transport for Throttled<T> {
     fn bytes_per_sec(&self) -> Option<f64> {
         Some(self.bytes_per_sec)
     }
+    fn set_write_deadline(&mut self, deadline: Duration) {
+        self.inner.set_write_deadline(deadline)
+    }
     fn fault_counters(&self) -> Option<[super::FaultCounters; 2]> {
         self.inner.fault_counters()
     }

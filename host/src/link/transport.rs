@@ -1,10 +1,13 @@
 //! The byte pipe between host and firmware. Every transport moves opaque bytes
-//! (already framed by the protocol); reads run on a thread feeding a channel so
-//! the session can wait with a time-out on any kind of link.
+//! (already framed by the protocol); reads and writes run on threads behind
+//! channels so the session waits with a deadline on any kind of link, in both
+//! directions: a firmware that stops reading (a stalled or stopped process, a full
+//! pipe) costs a deadline, not a blocked call.
 use std::io::{self, Read, Write};
-use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, SyncSender, TrySendError};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// A bidirectional byte link to a firmware.
 pub trait Transport: Send {
@@ -18,6 +21,9 @@ pub trait Transport: Send {
     fn bytes_per_sec(&self) -> Option<f64> {
         None
     }
+    /// Longest a [`Transport::flush`] may wait for the firmware to take bytes before
+    /// it fails with `TimedOut` (the session sets its link time-out).
+    fn set_write_deadline(&mut self, _deadline: Duration) {}
     /// Human-readable description for messages.
     fn describe(&self) -> String;
     /// What a fault injector did to [outgoing, incoming] bytes, when there is one.
@@ -38,6 +44,9 @@ impl Transport for Box<dyn Transport> {
     }
     fn bytes_per_sec(&self) -> Option<f64> {
         (**self).bytes_per_sec()
+    }
+    fn set_write_deadline(&mut self, deadline: Duration) {
+        (**self).set_write_deadline(deadline)
     }
     fn describe(&self) -> String {
         (**self).describe()
@@ -108,6 +117,131 @@ impl Incoming {
     }
 }
 
+/// Batches of outgoing bytes in flight to the writer thread; beyond them a flush waits.
+const OUTGOING_BATCHES: usize = 16;
+
+/// Outgoing bytes written by a thread: [`Outgoing::flush`] hands the buffered bytes
+/// over and fails with `TimedOut` once one write has been blocked for the deadline
+/// (the firmware takes no bytes), or the batches in flight stay full that long.
+pub struct Outgoing {
+    tx: Option<SyncSender<Vec<u8>>>,
+    pending: Vec<u8>,
+    deadline: Duration,
+    /// The writer's error, once it stopped on one.
+    error: Arc<Mutex<Option<String>>>,
+    /// When the write in progress started, while one is.
+    writing_since: Arc<Mutex<Option<Instant>>>,
+    _thread: JoinHandle<()>,
+}
+
+impl Outgoing {
+    /// Starts a thread writing to `sink` (each batch written and flushed).
+    pub fn spawn<W: Write + Send + 'static>(mut sink: W, name: &str) -> Self {
+        let (tx, rx) = mpsc::sync_channel::<Vec<u8>>(OUTGOING_BATCHES);
+        let error = Arc::new(Mutex::new(None));
+        let writing_since = Arc::new(Mutex::new(None));
+        let (seen, since) = (Arc::clone(&error), Arc::clone(&writing_since));
+        let thread = std::thread::Builder::new()
+            .name(format!("link-tx-{name}"))
+            .spawn(move || {
+                for batch in rx {
+                    set(&since, Some(Instant::now()));
+                    let written = sink.write_all(&batch).and_then(|_| sink.flush());
+                    set(&since, None);
+                    if let Err(e) = written {
+                        set(&seen, Some(e.to_string()));
+                        return;
+                    }
+                }
+            })
+            .expect("spawning a writer thread");
+        Outgoing {
+            tx: Some(tx),
+            pending: Vec::new(),
+            deadline: Duration::from_secs(5),
+            error,
+            writing_since,
+            _thread: thread,
+        }
+    }
+
+    pub fn send(&mut self, bytes: &[u8]) {
+        self.pending.extend_from_slice(bytes);
+    }
+
+    pub fn set_deadline(&mut self, deadline: Duration) {
+        self.deadline = deadline;
+    }
+
+    /// Hands the buffered bytes to the writer. Called with nothing buffered, it still
+    /// reports a writer blocked past the deadline: the session polls it so.
+    pub fn flush(&mut self) -> io::Result<()> {
+        let start = Instant::now();
+        self.check_blocked(start)?;
+        if self.pending.is_empty() {
+            return Ok(());
+        }
+        let mut batch = std::mem::take(&mut self.pending);
+        let tx = self.tx.as_ref().ok_or_else(|| self.stopped())?;
+        loop {
+            self.check_blocked(start)?;
+            match tx.try_send(batch) {
+                Ok(()) => return Ok(()),
+                Err(TrySendError::Disconnected(_)) => return Err(self.stopped()),
+                Err(TrySendError::Full(b)) => {
+                    batch = b;
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+            }
+        }
+    }
+
+    /// `TimedOut` when the write in progress (or this flush, since `start`) has waited
+    /// for the deadline.
+    fn check_blocked(&self, start: Instant) -> io::Result<()> {
+        let blocked = self
+            .writing_since
+            .lock()
+            .ok()
+            .and_then(|s| *s)
+            .map_or(Duration::ZERO, |t| t.elapsed());
+        let waited = blocked.max(start.elapsed());
+        if waited >= self.deadline {
+            return Err(io::Error::new(
+                io::ErrorKind::TimedOut,
+                format!(
+                    "the firmware took no bytes for {:.1} s (stopped or stalled)",
+                    waited.as_secs_f64()
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    fn stopped(&self) -> io::Error {
+        let why = self.error.lock().ok().and_then(|e| e.clone());
+        io::Error::new(
+            io::ErrorKind::BrokenPipe,
+            why.unwrap_or_else(|| "the link's writer stopped".into()),
+        )
+    }
+}
+
+/// Sets a value shared with the writer thread (a poisoned lock only loses the update).
+fn set<T>(slot: &Mutex<T>, value: T) {
+    if let Ok(mut s) = slot.lock() {
+        *s = value;
+    }
+}
+
+impl Drop for Outgoing {
+    fn drop(&mut self) {
+        // Closing the channel ends the writer once it has written what it holds; it is
+        // not joined, as it may be blocked on a firmware that stopped reading.
+        self.tx.take();
+    }
+}
+
 /// `impl Transport for $link` by delegating to its `inner` [`StreamTransport`]
 /// (the links differ only in how they open the stream and what they keep alive).
 macro_rules! delegate_to_inner_stream {
@@ -125,6 +259,9 @@ macro_rules! delegate_to_inner_stream {
             ) -> std::io::Result<Option<Vec<u8>>> {
                 $crate::link::transport::Transport::recv(&mut self.inner, timeout)
             }
+            fn set_write_deadline(&mut self, deadline: std::time::Duration) {
+                $crate::link::transport::Transport::set_write_deadline(&mut self.inner, deadline)
+            }
             fn describe(&self) -> String {
                 $crate::link::transport::Transport::describe(&self.inner)
             }
@@ -133,19 +270,38 @@ macro_rules! delegate_to_inner_stream {
 }
 pub(crate) use delegate_to_inner_stream;
 
-/// A transport made of any writer and a reader thread.
-pub struct StreamTransport<W: Write + Send> {
-    pub(crate) writer: W,
+/// A transport made of a writer thread and a reader thread.
+pub struct StreamTransport {
+    pub(crate) outgoing: Outgoing,
     pub(crate) incoming: Incoming,
     pub(crate) name: String,
 }
 
-impl<W: Write + Send> Transport for StreamTransport<W> {
+impl StreamTransport {
+    /// Threads writing to `sink` and reading from `source`; `name` for messages.
+    pub fn spawn<W, R>(sink: W, source: R, kind: &str, name: String) -> Self
+    where
+        W: Write + Send + 'static,
+        R: Read + Send + 'static,
+    {
+        StreamTransport {
+            outgoing: Outgoing::spawn(sink, kind),
+            incoming: Incoming::spawn(source, kind),
+            name,
+        }
+    }
+}
+
+impl Transport for StreamTransport {
     fn send(&mut self, bytes: &[u8]) -> io::Result<()> {
-        self.writer.write_all(bytes)
+        self.outgoing.send(bytes);
+        Ok(())
     }
     fn flush(&mut self) -> io::Result<()> {
-        self.writer.flush()
+        self.outgoing.flush()
+    }
+    fn set_write_deadline(&mut self, deadline: Duration) {
+        self.outgoing.set_deadline(deadline);
     }
     fn recv(&mut self, timeout: Duration) -> io::Result<Option<Vec<u8>>> {
         self.incoming.recv(timeout)
