@@ -303,7 +303,8 @@ def run_scene(binary, cache, scene, frames, split=False, baseline=None):
             result["baseline"] = run_baseline(baseline, ds, runs, scene, len(oe))
         except RuntimeError as e:
             # An older build may refuse a newer configuration (the embedded profile).
-            print(f"[{scene}] baseline left out: {str(e).splitlines()[-1]}", flush=True)
+            why = [line for line in str(e).splitlines() if line.strip()]
+            print(f"[{scene}] baseline left out: {why[-1] if why else e}", flush=True)
     if split:
         print(f"[{scene}] ours: CPU split (--fw-processor stats, sift) ...", flush=True)
         result["ours"]["cpu_split_ms"] = cpu_split(

@@ -107,20 +107,29 @@ fn config(w: u16, h: u16) -> Configure {
     }
 }
 
+/// Epoch `epoch` of 8-bit `w` x `h` frames, 0.1 s apart.
+fn gray_frames<'a>(
+    epoch: u32,
+    (left, right): (&'a [u8], &'a [u8]),
+    w: u16,
+    h: u16,
+) -> EpochFrames<'a> {
+    EpochFrames {
+        epoch,
+        timestamp_us: epoch as u64 * 100_000,
+        width: w,
+        height: h,
+        format: PixelFormat::Gray8,
+        left,
+        right,
+        aux: None,
+    }
+}
+
 fn send_epochs<T: Transport>(s: &mut Session<T>, epochs: std::ops::Range<u32>, w: u16, h: u16) {
     for e in epochs {
         let (l, r) = (image(e, 0, w, h), image(e, 1, w, h));
-        let f = EpochFrames {
-            epoch: e,
-            timestamp_us: e as u64 * 100_000,
-            width: w,
-            height: h,
-            format: PixelFormat::Gray8,
-            left: &l,
-            right: &r,
-            aux: None,
-        };
-        s.send_epoch(&f).unwrap();
+        s.send_epoch(&gray_frames(e, (&l, &r), w, h)).unwrap();
     }
 }
 
@@ -404,17 +413,8 @@ fn bad_input_is_refused_clearly_and_the_session_goes_on() {
 
     // A frame larger than the configured capacity: that epoch is lost.
     let big = vec![7u8; 2 * W as usize * H as usize];
-    let f = EpochFrames {
-        epoch: 100,
-        timestamp_us: 0,
-        width: 2 * W,
-        height: H,
-        format: PixelFormat::Gray8,
-        left: &big,
-        right: &big,
-        aux: None,
-    };
-    s.send_epoch(&f).unwrap();
+    s.send_epoch(&gray_frames(100, (&big, &big), 2 * W, H))
+        .unwrap();
     let text = wait_for_error(&mut s, ErrorCode::FrameTooLarge);
     assert!(text.contains("256x96"), "{text}");
 
@@ -491,17 +491,7 @@ fn a_frame_of_another_size_than_the_cameras_is_refused_naming_the_field() {
     s.configure(&config(W, H)).unwrap();
     let (w, h) = (W - 32, H - 16);
     let (l, r) = (image(0, 0, w, h), image(0, 1, w, h));
-    let f = EpochFrames {
-        epoch: 0,
-        timestamp_us: 0,
-        width: w,
-        height: h,
-        format: PixelFormat::Gray8,
-        left: &l,
-        right: &r,
-        aux: None,
-    };
-    s.send_epoch(&f).unwrap();
+    s.send_epoch(&gray_frames(0, (&l, &r), w, h)).unwrap();
     let text = wait_for_error(&mut s, ErrorCode::FrameSize);
     assert!(
         text.contains("Left frame is 96x80") && text.contains("width_px x height_px is 128x96"),
