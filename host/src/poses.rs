@@ -17,10 +17,12 @@ pub const IDENTITY: KittiPose = [
 /// Why a pose file could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum PoseError {
-    #[error("{path}: cannot read or write: {source}")]
+    // The I/O error is part of the text and deliberately not a `source`: an `{:#}`
+    // chain would print it twice.
+    #[error("{path}: cannot read or write: {error}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     #[error("{path}: line {line}: {problem}")]
     Line {
@@ -73,9 +75,9 @@ pub fn parse_poses(text: &str, path: &Path) -> Result<Vec<KittiPose>, PoseError>
 
 /// Reads a KITTI pose file.
 pub fn read_poses(path: &Path) -> Result<Vec<KittiPose>, PoseError> {
-    let text = std::fs::read_to_string(path).map_err(|source| PoseError::Io {
+    let text = std::fs::read_to_string(path).map_err(|error| PoseError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     })?;
     parse_poses(&text, path)
 }
@@ -100,9 +102,9 @@ pub fn write_poses(path: &Path, poses: &[KittiPose]) -> Result<(), PoseError> {
         text.push_str(&format_pose(p));
         text.push('\n');
     }
-    std::fs::write(path, text).map_err(|source| PoseError::Io {
+    std::fs::write(path, text).map_err(|error| PoseError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     })
 }
 

@@ -1,5 +1,6 @@
-//! `phototraverse budget` from the command line: its table, and a reader that goes
-//! away (`budget | head`) ends it quietly instead of a panic on the closed pipe.
+//! `phototraverse budget` from the command line: its table, its exit status against
+//! `--ram`, and a reader that goes away (`budget | head`) ends it quietly instead of a
+//! panic on the closed pipe.
 mod common;
 use common::ok;
 use std::process::{Command, Stdio};
@@ -24,6 +25,18 @@ fn budget_prints_the_embedded_profile_fitting_in_512k() {
         out.contains("excluding frames: fits in 524288 bytes of RAM"),
         "{out}"
     );
+}
+
+#[test]
+fn a_configuration_that_does_not_fit_the_ram_exits_non_zero() {
+    let out = common::phototraverse(&[
+        "budget", "--width", "640", "--height", "480", "--ram", "512K",
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    // The table is still printed, then why it failed.
+    assert!(String::from_utf8_lossy(&out.stdout).contains("excluding frames: does NOT fit"));
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(e.contains("does not fit in 524288 bytes of RAM"), "{e}");
 }
 
 #[test]

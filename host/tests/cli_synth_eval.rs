@@ -110,6 +110,21 @@ fn synth_then_eval() {
 }
 
 #[test]
+fn eval_names_a_missing_file_and_its_cause_once() {
+    let t = tempfile::tempdir().unwrap();
+    let gt = t.path().join("absent.txt");
+    let out = phototraverse(&["eval", gt.to_str().unwrap(), gt.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(e.contains("absent.txt: cannot read or write"), "{e}");
+    assert_eq!(
+        e.matches("os error 2").count(),
+        1,
+        "the cause printed once: {e}"
+    );
+}
+
+#[test]
 fn same_seed_same_bytes_with_every_imperfection() {
     let t = tempfile::tempdir().unwrap();
     let run = |name: &str, seed: &str| {

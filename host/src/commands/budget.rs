@@ -21,7 +21,9 @@ pub struct Args {
     /// Pipeline settings (TOML).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// RAM available on the target, bytes (suffixes K, M accepted: 512K, 2M).
+    /// RAM available on the target, bytes (suffixes K, M accepted: 512K, 2M). The command
+    /// exits with status 1 when the memory without the frame buffers does not fit (the
+    /// frames may live in other memory: whether they fit too is printed).
     #[arg(long)]
     pub ram: Option<String>,
     /// Print JSON instead of a table.
@@ -119,8 +121,19 @@ pub fn run(args: Args) -> Result<()> {
     let r = report(&args)?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
-        return Ok(());
+    } else {
+        print_table(&r);
     }
+    match (r.ram_bytes, r.fits_excluding_frames) {
+        (Some(ram), Some(false)) => anyhow::bail!(
+            "the configuration needs {} bytes besides the frames: it does not fit in {ram} bytes of RAM",
+            r.working_excluding_frames
+        ),
+        _ => Ok(()),
+    }
+}
+
+fn print_table(r: &BudgetReport) {
     println!("memory budget at {}x{} (bytes)", r.width, r.height);
     for c in &r.components {
         println!("  {:<36} {:<8} {:>10}", c.name, c.kind, c.bytes);
@@ -158,5 +171,4 @@ pub fn run(args: Args) -> Result<()> {
             ram as i64 - r.total_bytes as i64
         );
     }
-    Ok(())
 }
