@@ -168,6 +168,17 @@ impl PipelineSettings {
             self.sigma_px > 0.0 && self.sigma_px.is_finite(),
             "sigma_px must be positive"
         );
+        anyhow::ensure!(
+            self.contrast_threshold >= 0.0 && self.contrast_threshold.is_finite(),
+            "contrast_threshold must be finite and at least 0"
+        );
+        if let Some(d) = self.max_disparity_px {
+            // A range below one pixel searches nothing: every epoch would be flagged.
+            anyhow::ensure!(
+                d >= 1.0 && d.is_finite(),
+                "max_disparity_px must be at least 1 pixel (the stereo search range), got {d}"
+            );
+        }
         if let Some(d) = &self.datum {
             anyhow::ensure!(
                 d.pose().to_params().iter().all(|v| v.is_finite()),
@@ -255,6 +266,12 @@ mod tests {
         std::fs::write(&bad, "window = 1\n").unwrap();
         let err = format!("{:#}", PipelineSettings::from_file(&bad).unwrap_err());
         assert!(err.contains("window must be at least 2"), "{err}");
+        std::fs::write(&bad, "max_disparity_px = 0\n").unwrap();
+        let err = format!("{:#}", PipelineSettings::from_file(&bad).unwrap_err());
+        assert!(
+            err.contains("max_disparity_px must be at least 1 pixel"),
+            "{err}"
+        );
         std::fs::write(&bad, "mode = \"seed1999\"\n").unwrap();
         let err = format!("{:#}", PipelineSettings::from_file(&bad).unwrap_err());
         assert!(err.contains("seed1999"), "{err}");

@@ -343,11 +343,26 @@ fn read_times(path: &Path, expected: usize) -> Result<Vec<f64>, DatasetError> {
         if line.is_empty() {
             continue;
         }
-        let v: f64 = line.parse().map_err(|_| DatasetError::Times {
+        let bad = |problem: String| DatasetError::Times {
             path: path.to_path_buf(),
             line: i + 1,
-            problem: format!("`{line}` is not a number"),
-        })?;
+            problem,
+        };
+        let v: f64 = line
+            .parse()
+            .map_err(|_| bad(format!("`{line}` is not a number")))?;
+        // The traverse's motion model and velocity constraint divide by the time
+        // between epochs: it must be a finite, increasing clock.
+        if !v.is_finite() || v < 0.0 {
+            return Err(bad(format!("`{line}` is not a time (finite seconds >= 0)")));
+        }
+        if let Some(&prev) = times.last() {
+            if v <= prev {
+                return Err(bad(format!(
+                    "{v} s is not after the previous epoch's {prev} s (times must increase)"
+                )));
+            }
+        }
         times.push(v);
     }
     if times.len() != expected {
@@ -363,6 +378,30 @@ fn read_times(path: &Path, expected: usize) -> Result<Vec<f64>, DatasetError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn times_must_be_finite_and_increasing() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("times.txt");
+        let read = |text: &str| {
+            std::fs::write(&path, text).unwrap();
+            read_times(&path, text.lines().count()).map_err(|e| e.to_string())
+        };
+        assert_eq!(read("0\n0.1\n0.25\n").unwrap(), vec![0.0, 0.1, 0.25]);
+        for (text, line, says) in [
+            ("0\nNaN\n", 2, "not a time"),
+            ("-0.1\n0\n", 1, "not a time"),
+            ("0\ninf\n", 2, "not a time"),
+            ("0\n0.1\n0.1\n", 3, "not after the previous"),
+            ("0.2\n0.1\n", 2, "not after the previous"),
+        ] {
+            let e = read(text).unwrap_err();
+            assert!(
+                e.contains(&format!("line {line}")) && e.contains(says),
+                "{text:?}: {e}"
+            );
+        }
+    }
 
     #[test]
     fn epoch_keys() {
