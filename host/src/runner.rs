@@ -14,8 +14,8 @@ use crate::link::LinkOptions;
 use crate::pipeline::PipelineSettings;
 use crate::poses::{format_pose, KittiPose};
 use crate::report::{
-    efoto_image_index, write_efoto, write_eop_csv, write_html, write_ply, CameraEop, EpochRecord,
-    EpochStatus, MemoryLine, QualitySummary, RigReport, RunReport, TieCollector,
+    efoto_image_index, write_efoto, write_eop_csv, write_html, write_ply, CameraEop, EpochChi2,
+    EpochRecord, EpochStatus, MemoryLine, QualitySummary, RigReport, RunReport, TieCollector,
 };
 use crate::session::{EpochFrames, Session, SessionOptions};
 use anyhow::{Context, Result};
@@ -262,6 +262,7 @@ impl<'d> Run<'d> {
             right: CameraEop::from_pose(&right, None),
             sigma0: None,
             chi2_passed: None,
+            chi2: None,
             observations: 0,
             tie_points: 0,
             keypoints: [0; 2],
@@ -312,7 +313,21 @@ impl<'d> Run<'d> {
             left: CameraEop::from_pose(&left, sigma),
             right: CameraEop::from_pose(&right, None),
             sigma0: (r.sigma0 > 0.0).then_some(r.sigma0),
-            chi2_passed: Some(fl & flags::CHI2 == 0),
+            chi2_passed: epoch_test(r).map(|t| t.passed),
+            chi2: epoch_test(r).map(|t| EpochChi2 {
+                statistic: t.statistic,
+                dof: t.dof,
+                lower: t.lower,
+                upper: t.upper,
+                result: if t.passed {
+                    "passed"
+                } else if t.statistic > t.upper {
+                    "above"
+                } else {
+                    "below"
+                }
+                .into(),
+            }),
             observations: r.counts.observations as usize,
             tie_points: r.counts.temporal_matches as usize,
             keypoints: r.counts.keypoints,
@@ -337,11 +352,8 @@ impl<'d> Run<'d> {
                 calibration_base_m: c.base_m,
             });
         }
-        let dof = r.extra[3];
-        if matches!(r.status, status::OK | status::FLAGGED) && r.sigma0 > 0.0 && dof >= 1.0 {
-            let dof = dof as usize;
-            self.chi2
-                .push(ChiSquareTest::new(r.sigma0 * r.sigma0 * dof as f64, dof));
+        if let Some(t) = epoch_test(r) {
+            self.chi2.push(t);
         }
     }
 
@@ -460,6 +472,16 @@ fn median(v: &mut [f64]) -> f64 {
     }
     v.sort_by(|a, b| a.total_cmp(b));
     v[v.len() / 2]
+}
+
+/// The global test of an adjusted epoch's window, from its sigma0 and redundancy (the
+/// traverse processor's fourth processor-defined value).
+fn epoch_test(r: &EpochResult) -> Option<ChiSquareTest> {
+    let dof = r.extra[3];
+    (matches!(r.status, status::OK | status::FLAGGED) && r.sigma0 > 0.0 && dof >= 1.0).then(|| {
+        let dof = dof as usize;
+        ChiSquareTest::new(r.sigma0 * r.sigma0 * dof as f64, dof)
+    })
 }
 
 /// The flags of an epoch in words.

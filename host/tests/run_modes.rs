@@ -38,6 +38,29 @@ fn run_seed2014_mode_with_the_rig_estimated() {
         .iter()
         .sum::<u64>();
     assert_eq!(counts, adjusted, "{q}");
+    // Each epoch's test agrees with the summary's counts.
+    let epochs = json["epochs"].as_array().unwrap();
+    for (key, result) in [
+        ("chi2_passed", "passed"),
+        ("chi2_failed", "above"),
+        ("chi2_below", "below"),
+    ] {
+        let n = epochs
+            .iter()
+            .filter(|e| e["chi2"]["result"] == result)
+            .count() as u64;
+        assert_eq!(n, q[key].as_u64().unwrap(), "{key}: {q}");
+    }
+    for e in epochs.iter().filter(|e| !e["chi2"].is_null()) {
+        let c = &e["chi2"];
+        assert_eq!(e["chi2_passed"], c["result"] == "passed", "{e}");
+        let s0 = e["sigma0"].as_f64().unwrap();
+        let dof = c["dof"].as_f64().unwrap();
+        assert!(
+            (c["statistic"].as_f64().unwrap() - s0 * s0 * dof).abs() < 1e-9 * dof,
+            "{c}"
+        );
+    }
     // The estimated base stays near the calibrated 0.4 m rig (seed 000's bar).
     let rig = &json["rig"];
     let b: Vec<f64> = rig["base_m"]

@@ -164,6 +164,7 @@ mod tests {
             right: CameraEop { sigma: None, ..eop },
             sigma0: Some(1.05),
             chi2_passed: Some(false),
+            chi2: None,
             observations: 400,
             tie_points: 100,
             keypoints: [1000, 990],

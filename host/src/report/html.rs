@@ -367,6 +367,7 @@ mod tests {
                 right: eop,
                 sigma0: Some(1.0),
                 chi2_passed: Some(true),
+                chi2: None,
                 observations: 100,
                 tie_points: 25,
                 keypoints: [1000, 990],

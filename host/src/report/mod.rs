@@ -14,6 +14,6 @@ pub use export::{efoto_image_index, write_efoto, write_eop_csv, write_ply};
 pub use html::write_html;
 pub use points::TieCollector;
 pub use records::{
-    sigmas_in_degrees, CameraEop, EpochRecord, EpochStatus, ImageMeasurement, MemoryLine,
-    QualitySummary, RigReport, RunReport, TiePoint,
+    sigmas_in_degrees, CameraEop, EpochChi2, EpochRecord, EpochStatus, ImageMeasurement,
+    MemoryLine, QualitySummary, RigReport, RunReport, TiePoint,
 };

@@ -85,7 +85,12 @@ pub struct EpochRecord {
     pub left: CameraEop,
     pub right: CameraEop,
     pub sigma0: Option<f64>,
+    /// The window adjustment's global test passed: the statistic within its bounds, as
+    /// the run's quality summary counts it.
     pub chi2_passed: Option<bool>,
+    /// That test: statistic, degrees of freedom, bounds and outcome.
+    #[serde(default)]
+    pub chi2: Option<EpochChi2>,
     pub observations: usize,
     pub tie_points: usize,
     /// Keypoints of the left and right image, and their stereo matches.
@@ -95,6 +100,19 @@ pub struct EpochRecord {
     pub stereo_matches: u32,
     /// Milliseconds per stage (features, matching, adjustment, link, ...).
     pub stage_ms: BTreeMap<String, f64>,
+}
+
+/// The global chi-square test of an epoch's window adjustment (95 %, two-sided).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpochChi2 {
+    /// `vTPv` with the a-priori variance factor: `sigma0^2 * dof`.
+    pub statistic: f64,
+    pub dof: usize,
+    pub lower: f64,
+    pub upper: f64,
+    /// `passed`, `above` (blunders or a model error: the epoch is flagged) or `below`
+    /// (the a-priori image sigma is pessimistic).
+    pub result: String,
 }
 
 /// A measured position of a tie point in one image.
