@@ -69,7 +69,7 @@ impl DatumSettings {
 /// fine_octave = false          # half-pixel scales too: ~2x keypoints, ~2x SIFT time
 /// edge_ratio = 10.0            # principal curvature ratio
 /// match_ratio = 0.8            # Lowe's ratio
-/// max_disparity_px = 320.0     # rectified rigs: disparity search range
+/// max_disparity_px = 320.0     # rectified rigs: disparity search range (default: half the width)
 /// window = 3                   # epochs in the adjustment window
 /// track_capacity = 600         # tracks kept at once
 /// fixed_epochs = 8             # epochs that left the window whose observations still count

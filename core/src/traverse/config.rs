@@ -419,8 +419,9 @@ impl TraverseConfig {
 /// procedures (docs/configuration.md, "Traverse modes").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum TraverseMode {
-    /// The project's default: an 8-epoch sliding window, robust snooping, base-length
-    /// and smoothness constraints.
+    /// The project's default: a sliding window of `TRAVERSE_WINDOW` (3) adjusted epochs
+    /// (8 with the rig estimated) and the observations of `TRAVERSE_FIXED_EPOCHS` that
+    /// left it, robust snooping, base-length and smoothness constraints.
     #[default]
     Window,
     /// Seed 000 (Lemes Neto 2014): four-image sequences (two epochs), base-length
