@@ -305,6 +305,7 @@ impl<'d> Run<'d> {
                     .collect()
             })
             .unwrap_or_default();
+        let test = epoch_test(r);
         EpochRecord {
             epoch: i,
             time: Some(time),
@@ -313,21 +314,8 @@ impl<'d> Run<'d> {
             left: CameraEop::from_pose(&left, sigma),
             right: CameraEop::from_pose(&right, None),
             sigma0: (r.sigma0 > 0.0).then_some(r.sigma0),
-            chi2_passed: epoch_test(r).map(|t| t.passed),
-            chi2: epoch_test(r).map(|t| EpochChi2 {
-                statistic: t.statistic,
-                dof: t.dof,
-                lower: t.lower,
-                upper: t.upper,
-                result: if t.passed {
-                    "passed"
-                } else if t.statistic > t.upper {
-                    "above"
-                } else {
-                    "below"
-                }
-                .into(),
-            }),
+            chi2_passed: test.map(|t| t.passed),
+            chi2: test.map(EpochChi2::from),
             observations: r.counts.observations as usize,
             tie_points: r.counts.temporal_matches as usize,
             keypoints: r.counts.keypoints,

@@ -645,8 +645,14 @@ impl<T: Transport> Session<T> {
                 return Ok(());
             }
             self.service(Duration::from_millis(20).min(self.rto))?;
-            self.check_silence(what)?;
             let silent = self.last_heard.elapsed();
+            if silent > self.opts.timeout {
+                return Err(SessionError::Timeout {
+                    secs: silent.as_secs_f64(),
+                    link: self.t.describe(),
+                    what: what.to_string(),
+                });
+            }
             if silent > self.backoff && last_nudge.elapsed() > self.backoff {
                 // Our window may be fine while an answer of the firmware was lost:
                 // ask it to resend from what we expect.
@@ -659,20 +665,6 @@ impl<T: Transport> Session<T> {
                 self.link.nacks_sent += 1;
             }
         }
-    }
-
-    /// A firmware silent for longer than the link time-out is unresponsive, whatever
-    /// the host was waiting for (`what`, for the message).
-    fn check_silence(&self, what: &str) -> Result<(), SessionError> {
-        let silent = self.last_heard.elapsed();
-        if silent > self.opts.timeout {
-            return Err(SessionError::Timeout {
-                secs: silent.as_secs_f64(),
-                link: self.t.describe(),
-                what: what.to_string(),
-            });
-        }
-        Ok(())
     }
 
     fn write(&mut self, bytes: &[u8]) -> Result<(), SessionError> {

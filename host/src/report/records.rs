@@ -1,4 +1,5 @@
 //! Plain records of a run, serialised as `report.json`.
+use phototraverse_core::adjust::quality::ChiSquareTest;
 use phototraverse_core::camera::Pose;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -113,6 +114,25 @@ pub struct EpochChi2 {
     /// `passed`, `above` (blunders or a model error: the epoch is flagged) or `below`
     /// (the a-priori image sigma is pessimistic).
     pub result: String,
+}
+
+impl From<ChiSquareTest> for EpochChi2 {
+    fn from(t: ChiSquareTest) -> Self {
+        let result = if t.passed {
+            "passed"
+        } else if t.statistic > t.upper {
+            "above"
+        } else {
+            "below"
+        };
+        EpochChi2 {
+            statistic: t.statistic,
+            dof: t.dof,
+            lower: t.lower,
+            upper: t.upper,
+            result: result.into(),
+        }
+    }
 }
 
 /// A measured position of a tie point in one image.
