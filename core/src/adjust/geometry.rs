@@ -91,7 +91,7 @@ pub type InteriorCorrections = [f64; 6];
 /// Applies interior `corrections` to `pr`, a projection into `camera` computed with the
 /// corrected focal length `focal_mm` (calibrated plus `corrections`): adds the principal
 /// point shift and fills `d_interior` (`d xc / d f = xc / f` before the shift).
-#[inline]
+#[inline(always)]
 pub fn with_interior(
     mut pr: RigProjection,
     camera: Camera,
@@ -245,7 +245,7 @@ pub fn right_rotation(left: &Rotations, rel: &Rotations) -> [f64; 9] {
 }
 
 /// [`project_rig`] with an epoch's rotations precomputed ([`EpochRotations`]).
-#[inline]
+#[inline(always)]
 pub fn project_epoch(
     rot: &EpochRotations,
     centre: &[f64; 3],

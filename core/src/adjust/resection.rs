@@ -25,8 +25,13 @@ pub struct Correspondence {
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ResectionConfig {
-    /// RANSAC samples drawn.
+    /// Most RANSAC samples drawn.
     pub samples: usize,
+    /// Probability that at least one sample drawn is free of outliers: the search
+    /// stops once the best hypothesis's inlier ratio makes `samples` more than that
+    /// needs (the standard adaptive stopping rule, never fewer than
+    /// [`MIN_RANSAC_SAMPLES`]). 1.0 draws all `samples`.
+    pub confidence: f64,
     /// Inlier threshold on the reprojection error, mm.
     pub threshold_mm: f64,
     /// LCG seed (deterministic results).
@@ -41,6 +46,7 @@ impl Default for ResectionConfig {
     fn default() -> Self {
         ResectionConfig {
             samples: 200,
+            confidence: 0.9999,
             threshold_mm: 0.02,
             seed: 0x5eed,
             max_iterations: 20,
@@ -299,6 +305,29 @@ fn triangle_area2(a: &[f64; 3], b: &[f64; 3], c: &[f64; 3]) -> f64 {
     ab.cross(&ac).norm()
 }
 
+/// Fewest RANSAC samples drawn whatever the inlier ratio: a first lucky sample with
+/// a wrong pose that most points happen to fit must not end the search.
+pub const MIN_RANSAC_SAMPLES: usize = 16;
+
+/// Samples a RANSAC of minimal size 3 needs to draw one outlier-free sample with
+/// probability `confidence` when `inliers` of `n` correspondences are inliers.
+pub(crate) fn samples_needed(inliers: usize, n: usize, confidence: f64) -> usize {
+    let w = inliers as f64 / n.max(1) as f64;
+    let clean = w * w * w;
+    if !(confidence < 1.0) || clean <= 0.0 {
+        return usize::MAX;
+    }
+    if clean >= 1.0 {
+        return 0;
+    }
+    let k = libm::log(1.0 - confidence) / libm::log(1.0 - clean);
+    if k.is_finite() && k < usize::MAX as f64 {
+        libm::ceil(k) as usize
+    } else {
+        usize::MAX
+    }
+}
+
 /// Robust resection of a camera with focal length `focal_mm`.
 pub fn resect(
     corr: &[Correspondence],
@@ -325,7 +354,11 @@ pub fn resect(
     let mut rng = Lcg(cfg.seed);
     let mut best: Option<(Pose, usize, f64)> = None;
     let mut candidates = [Pose::default(); 4];
-    for _ in 0..cfg.samples {
+    let mut needed = cfg.samples;
+    for drawn in 0..cfg.samples {
+        if drawn >= needed.max(MIN_RANSAC_SAMPLES) {
+            break;
+        }
         let i = rng.below(corr.len());
         let mut j = rng.below(corr.len() - 1);
         if j >= i {
@@ -352,6 +385,7 @@ pub fn resect(
             };
             if better {
                 best = Some((*pose, inl, sum));
+                needed = needed.min(samples_needed(inl, corr.len(), cfg.confidence));
             }
         }
     }
@@ -359,7 +393,14 @@ pub fn resect(
     if inliers < cfg.min_inliers.max(4) {
         return Err(ResectionError::TooFewPoints);
     }
-    refine(pose, corr, focal_mm, cfg)
+    let first = refine(pose, corr, focal_mm, cfg)?;
+    // The inliers of the refined pose, refined once more: the result no longer depends
+    // on which sample's pose won (the search may stop at the first with enough
+    // inliers), and correspondences the sample's pose just missed take part.
+    match refine(first.pose, corr, focal_mm, cfg) {
+        Ok(again) if again.inliers >= first.inliers => Ok(again),
+        _ => Ok(first),
+    }
 }
 
 /// Least-squares refinement over the inliers of `pose` (damped Gauss-Newton).

@@ -488,6 +488,58 @@ fn ransac_resection_with_outliers_and_degenerate_input() {
     assert_eq!(resect(&nan, f, &cfg), Err(ResectionError::NotFinite));
 }
 
+/// The adaptive stopping rule: the textbook sample counts, and on a set with more
+/// outliers than inliers it still finds every inlier, as drawing all samples does.
+#[test]
+fn ransac_stops_when_the_inlier_ratio_allows_and_not_before() {
+    use super::resection::{samples_needed, MIN_RANSAC_SAMPLES};
+    // ln(1e-4) / ln(1 - 0.5^3) = 68.97; ln(1e-4) / ln(1 - 0.9^3) = 7.03.
+    assert_eq!(samples_needed(50, 100, 0.9999), 69);
+    assert_eq!(samples_needed(90, 100, 0.9999), 8);
+    assert_eq!(samples_needed(10, 10, 0.9999), 0);
+    assert_eq!(samples_needed(0, 10, 0.9999), usize::MAX);
+    assert_eq!(samples_needed(5, 10, 1.0), usize::MAX);
+    const { assert!(MIN_RANSAC_SAMPLES >= 8) };
+
+    let mut rng = Rng(71);
+    let f = 8.0;
+    let sigma = 0.0015;
+    let truth = Pose::from_degrees(90.5, -1.0, 3.0, [-0.2, 5.0, 1.4]);
+    let mut c = resection_scene(&mut rng, 60, f, &truth);
+    for (i, ci) in c.iter_mut().enumerate() {
+        if i % 5 < 3 {
+            // 36 of 60 wrong by 0.05 to 0.3 mm (10 to 60 px).
+            ci.xy[0] += rng.uniform(0.05, 0.3) * if i % 2 == 0 { 1.0 } else { -1.0 };
+            ci.xy[1] -= rng.uniform(0.05, 0.3);
+        } else {
+            ci.xy[0] += sigma * rng.normal();
+            ci.xy[1] += sigma * rng.normal();
+        }
+    }
+    let adaptive = ResectionConfig {
+        threshold_mm: 4.0 * sigma,
+        ..ResectionConfig::default()
+    };
+    let every = ResectionConfig {
+        confidence: 1.0,
+        ..adaptive
+    };
+    let (a, e) = (
+        resect(&c, f, &adaptive).unwrap(),
+        resect(&c, f, &every).unwrap(),
+    );
+    assert_eq!((a.inliers, e.inliers), (24, 24));
+    let (pa, pe) = (a.pose.to_params(), e.pose.to_params());
+    for i in 0..6 {
+        assert!(
+            (pa[i] - pe[i]).abs() <= 1e-3 * a.std[i],
+            "param {i}: {} vs {}",
+            pa[i],
+            pe[i]
+        );
+    }
+}
+
 // ---------- synthetic windows ----------
 
 pub(crate) struct Scene {

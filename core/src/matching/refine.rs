@@ -68,8 +68,9 @@ pub fn refine_checked(
 
 const T: usize = 2 * MAX_REFINE_HALF + 1;
 const S: usize = 2 * MAX_REFINE_RADIUS + 1;
-/// Side of the largest sampled search region (template plus search on both sides).
-const R: usize = T + 2 * MAX_REFINE_RADIUS;
+/// Side of the largest sampled search region (template plus search on both sides):
+/// every lane of [`window_sums`] reads inside a row.
+const R: usize = T + S - 1;
 
 /// Bilinear sample at (x, y); the caller guarantees `0 <= x < w - 1`, `0 <= y < h - 1`.
 #[inline]
@@ -346,6 +347,51 @@ pub fn recentre(
     (at, peak)
 }
 
+/// Sum, sum of squares and cross product with `zt` of the `n x n` windows that start at
+/// the first columns of `rows` (a region of row stride [`R`]), into `out` (its first
+/// `L` or all of it). The `L` offsets of a row are accumulated side by side, which the
+/// compiler vectorises: a window-by-window loop was the search's inner loop, one
+/// dependent addition per sample.
+#[inline]
+fn window_sums<const L: usize>(rows: &[f32], zt: &[f32], n: usize, out: &mut [[f32; 3]]) {
+    debug_assert!(n - 1 + L <= R);
+    // One quantity per pass: with a single accumulator array the lanes map onto
+    // vector registers (three interleaved arrays were vectorised across them instead).
+    let sum = lane_pass::<L>(rows, zt, n, |x, _| x);
+    let sum2 = lane_pass::<L>(rows, zt, n, |x, _| x * x);
+    let cross = lane_pass::<L>(rows, zt, n, |x, z| x * z);
+    for (k, o) in out.iter_mut().enumerate().take(L) {
+        *o = [sum[k], sum2[k], cross[k]];
+    }
+}
+
+/// `sum f(sample, template value)` over the `n x n` windows at the first `L` columns.
+#[inline(always)]
+fn lane_pass<const L: usize>(
+    rows: &[f32],
+    zt: &[f32],
+    n: usize,
+    f: impl Fn(f32, f32) -> f32,
+) -> [f32; L] {
+    let mut acc = [0f32; L];
+    for v in 0..n {
+        let row = &rows[v * R..v * R + R];
+        // A sum per template row, then the rows: the rows' additions are independent
+        // and overlap, where one running sum would wait on every previous addition.
+        let mut part = [0f32; L];
+        for (u, &z) in zt[v * n..(v + 1) * n].iter().enumerate() {
+            let s: &[f32; L] = row[u..u + L].try_into().unwrap_or(&[0.0; L]);
+            for (a, &x) in part.iter_mut().zip(s) {
+                *a += f(x, z);
+            }
+        }
+        for (a, p) in acc.iter_mut().zip(part) {
+            *a += p;
+        }
+    }
+    acc
+}
+
 /// Correlates the template `tpl` (half-size `h`, as [`sample_template`] wrote it) with
 /// `img` at whole-pixel offsets up to `(rx, ry)` around `centre`; a parabola through the
 /// peak and its neighbours gives the sub-pixel position on each searched axis.
@@ -380,17 +426,16 @@ pub fn correlate(
     );
     let mut score = [f32::MIN; S * S];
     let mut best = (0usize, 0usize, f32::MIN);
+    let cols = 2 * rx + 1;
     for oy in 0..=2 * ry {
-        for ox in 0..=2 * rx {
-            let (mut sum, mut sum2, mut cross) = (0f32, 0f32, 0f32);
-            for v in 0..n {
-                let row = &region[(oy + v) * R + ox..(oy + v) * R + ox + n];
-                for (&s, &z) in row.iter().zip(&zt[v * n..(v + 1) * n]) {
-                    sum += s;
-                    sum2 += s * s;
-                    cross += s * z;
-                }
-            }
+        let rows = &region[oy * R..];
+        let mut window = [[0f32; 3]; S];
+        match cols {
+            0..=4 => window_sums::<4>(rows, &zt, n, &mut window),
+            5..=8 => window_sums::<8>(rows, &zt, n, &mut window),
+            _ => window_sums::<S>(rows, &zt, n, &mut window),
+        }
+        for (ox, &[sum, sum2, cross]) in window[..cols].iter().enumerate() {
             let ncc = ncc(sum, sum2, cross, cnt, tnorm);
             score[oy * S + ox] = ncc;
             if ncc > best.2 {

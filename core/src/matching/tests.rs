@@ -830,3 +830,87 @@ fn a_recentred_correlation_does_not_lean_towards_its_start() {
     assert!(single > 0.02, "single fit: {single} px");
     assert!(centred < 0.005, "re-centred: {centred} px");
 }
+
+/// `correlate` (lanes of offsets summed side by side) against a window-by-window NCC in
+/// f64 with the same sub-pixel parabola: the same peak, the same position.
+#[test]
+fn correlate_agrees_with_a_direct_ncc_at_every_search_size() {
+    let (w, h) = (120usize, 80usize);
+    let img: Vec<u8> = (0..w * h)
+        .map(|i| {
+            let (x, y) = ((i % w) as f64, (i / w) as f64);
+            (128.0 + 60.0 * (0.31 * x + 0.17 * y).sin() + 40.0 * (0.23 * y - 0.11 * x).cos()) as u8
+        })
+        .collect();
+    let iv = ImageView::new(&img, w, h).unwrap();
+    let bil = |x: f64, y: f64| {
+        let (c, r) = (x.floor() as usize, y.floor() as usize);
+        let (fx, fy) = (x - c as f64, y - r as f64);
+        let p = |cc: usize, rr: usize| img[rr * w + cc] as f64;
+        (p(c, r) * (1.0 - fx) + p(c + 1, r) * fx) * (1.0 - fy)
+            + (p(c, r + 1) * (1.0 - fx) + p(c + 1, r + 1) * fx) * fy
+    };
+    // Starts off the template's position (60.3, 40.2), so most peaks are off centre.
+    let cases = [
+        (4usize, (1usize, 0usize), [60.1f32, 40.2f32]),
+        (4, (2, 2), [61.2, 39.4]),
+        (3, (4, 4), [62.4, 38.9]),
+        (7, (3, 1), [58.5, 40.0]),
+    ];
+    for (half, (rx, ry), start) in cases {
+        let mut tpl = [0f32; refine::TEMPLATE_LEN];
+        refine::sample_template(&iv, [60.3, 40.2], half, &mut tpl).unwrap();
+        let n = 2 * half + 1;
+        let t: Vec<f64> = tpl[..n * n].iter().map(|&v| v as f64).collect();
+        let tm = t.iter().sum::<f64>() / t.len() as f64;
+        let ncc = |ox: f64, oy: f64| {
+            let s: Vec<f64> = (0..n * n)
+                .map(|k| {
+                    let (u, v) = ((k % n) as f64, (k / n) as f64);
+                    bil(
+                        start[0] as f64 + ox + u - half as f64,
+                        start[1] as f64 + oy + v - half as f64,
+                    )
+                })
+                .collect();
+            let sm = s.iter().sum::<f64>() / s.len() as f64;
+            let cross: f64 = s.iter().zip(&t).map(|(a, b)| (a - sm) * (b - tm)).sum();
+            let ss: f64 = s.iter().map(|a| (a - sm) * (a - sm)).sum();
+            let tt: f64 = t.iter().map(|b| (b - tm) * (b - tm)).sum();
+            cross / (ss * tt).sqrt()
+        };
+        let (mut best, mut at) = (f64::MIN, (0i32, 0i32));
+        for oy in -(ry as i32)..=ry as i32 {
+            for ox in -(rx as i32)..=rx as i32 {
+                let v = ncc(ox as f64, oy as f64);
+                if v > best {
+                    (best, at) = (v, (ox, oy));
+                }
+            }
+        }
+        let vertex = |a: f64, b: f64, c: f64| (0.5 * (a - c) / (a - 2.0 * b + c)).clamp(-0.5, 0.5);
+        let (bx, by) = (at.0 as f64, at.1 as f64);
+        let dx = vertex(ncc(bx - 1.0, by), best, ncc(bx + 1.0, by));
+        let dy = if ry > 0 {
+            vertex(ncc(bx, by - 1.0), best, ncc(bx, by + 1.0))
+        } else {
+            0.0
+        };
+        let (p, peak) = refine::correlate(&tpl, half, &iv, start, (rx, ry), 0.5).unwrap();
+        let what = std::format!("half {half}, radius ({rx}, {ry})");
+        assert!(
+            (peak as f64 - best).abs() < 1e-4,
+            "{what}: peak {peak} vs {best}"
+        );
+        assert!(
+            (p[0] as f64 - (start[0] as f64 + bx + dx)).abs() < 2e-3,
+            "{what}: x {}",
+            p[0]
+        );
+        assert!(
+            (p[1] as f64 - (start[1] as f64 + by + dy)).abs() < 2e-3,
+            "{what}: y {}",
+            p[1]
+        );
+    }
+}
