@@ -488,12 +488,19 @@ fn poses_are_relative_to_the_datum_the_settings_give() {
         "{:?}",
         b[0]
     );
+    // Rounding differs between the two frames, and the decisions it reaches at thresholds
+    // (a correlation accepted, an observation snooped) move the first epochs by a few mm:
+    // as much as their own error against the truth (5 to 11 mm at epoch 3). A datum
+    // handled wrongly moves them by metres, or turns them by the datum's 30 deg.
+    const ROTATION: f64 = 2e-3;
+    const TRANSLATION_M: f64 = 1e-2;
     for (k, (pa, pb)) in a.iter().zip(&b).enumerate() {
-        let worst = pa
-            .iter()
-            .zip(pb)
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0, f64::max);
-        assert!(worst < 2e-3, "epoch {k}: {pa:?} vs {pb:?}");
+        for (i, (x, y)) in pa.iter().zip(pb).enumerate() {
+            let bound = if i % 4 == 3 { TRANSLATION_M } else { ROTATION };
+            assert!(
+                (x - y).abs() < bound,
+                "epoch {k}, element {i}: {pa:?} vs {pb:?}"
+            );
+        }
     }
 }
