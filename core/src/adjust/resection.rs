@@ -393,7 +393,14 @@ pub fn resect(
     if inliers < cfg.min_inliers.max(4) {
         return Err(ResectionError::TooFewPoints);
     }
-    refine(pose, corr, focal_mm, cfg)
+    let first = refine(pose, corr, focal_mm, cfg)?;
+    // The inliers of the refined pose, refined once more: the result no longer depends
+    // on which sample's pose won (the search may stop at the first with enough
+    // inliers), and correspondences the sample's pose just missed take part.
+    match refine(first.pose, corr, focal_mm, cfg) {
+        Ok(again) if again.inliers >= first.inliers => Ok(again),
+        _ => Ok(first),
+    }
 }
 
 /// Least-squares refinement over the inliers of `pose` (damped Gauss-Newton).
