@@ -17,44 +17,33 @@ import os
 
 import numpy as np
 
+from steps import read_poses, rotation_vector
+
 # Epochs after a loss that may still be poor (the bar's "first 3 epochs following a loss").
 GRACE = 3
 # A step is an outlier beyond this multiple of the scene's median step error.
 FACTOR = 5.0
 
 
-def homogeneous(p):
-    m = np.eye(4)
-    m[:3] = p
-    return m
-
-
 def step_errors(gt, est):
     """Translation (m) and rotation (deg) error of every epoch-to-epoch motion."""
     rot, tr = [], []
     for k in range(1, len(gt)):
-        true = np.linalg.inv(homogeneous(gt[k - 1])) @ homogeneous(gt[k])
-        ours = np.linalg.inv(homogeneous(est[k - 1])) @ homogeneous(est[k])
+        true = np.linalg.inv(gt[k - 1]) @ gt[k]
+        ours = np.linalg.inv(est[k - 1]) @ est[k]
         err = np.linalg.inv(ours) @ true
-        c = max(-1.0, min(1.0, (np.trace(err[:3, :3]) - 1.0) / 2.0))
-        rot.append(math.degrees(math.acos(c)))
+        rot.append(math.degrees(np.linalg.norm(rotation_vector(err[:3, :3]))))
         tr.append(float(np.linalg.norm(err[:3, 3])))
     return np.array(tr), np.array(rot)
 
 
-def dataset_of(cache, run):
-    """The scene a run was made on (`curves-real-rig` runs on `curves-real`'s data)."""
-    ds = os.path.realpath(os.path.join(cache, run))
-    if not os.path.exists(os.path.join(ds, "gt_poses.txt")):
-        ds = os.path.realpath(os.path.join(cache, run.replace("-rig", "")))
-    return ds
-
-
 def scene(cache, run):
     d = os.path.join(cache, "runs", run, "ours")
-    ds = dataset_of(cache, run)
-    gt = np.loadtxt(os.path.join(ds, "gt_poses.txt")).reshape(-1, 3, 4)
-    est = np.loadtxt(os.path.join(d, "poses.txt")).reshape(-1, 3, 4)
+    # run.py records the dataset each run used (`curves-real-rig` runs on `curves-real`'s).
+    with open(os.path.join(cache, "runs", run, "result.json")) as f:
+        ds = json.load(f)["dataset"]
+    gt = read_poses(os.path.join(ds, "gt_poses.txt"))
+    est = read_poses(os.path.join(d, "poses.txt"))
     if len(est) != len(gt):
         return None
     epochs = json.load(open(os.path.join(d, "report.json")))["epochs"]
@@ -85,7 +74,7 @@ def main():
         ap.error(f"{runs}: no runs (run bench/traverse/run.py with this cache first)")
     print(f"{'scene':24s} predicted losses  steps > {FACTOR:g}x median: outside losses / after a loss")
     for run in sorted(os.listdir(runs)):
-        if not os.path.exists(os.path.join(runs, run, "ours", "report.json")):
+        if not os.path.exists(os.path.join(runs, run, "result.json")):
             continue
         r = scene(args.cache, run)
         if r is None:

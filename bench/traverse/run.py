@@ -107,7 +107,7 @@ def seed_suffix(seed):
 
 def label(scene, seed):
     """A scene's name in the tables, with its seed when not synth's default."""
-    return scene + (f" s{seed}" if seed not in (None, DEFAULT_SEED) else "")
+    return scene + (f" s{seed}" if seed_suffix(seed) else "")
 
 
 def dataset_of(scene):

@@ -341,7 +341,8 @@ pub fn resect(
     {
         return Err(ResectionError::NotFinite);
     }
-    if corr.len() < 4 {
+    // Fewer correspondences than the inliers required cannot succeed: no sample is drawn.
+    if corr.len() < cfg.min_inliers.max(4) {
         return Err(ResectionError::TooFewPoints);
     }
     // Scale of the scene for the collinearity test.

@@ -691,11 +691,9 @@ impl<'a> Traverse<'a> {
     /// Robust resection of the current left camera on the first `n` correspondences;
     /// a pose only with at least `min_inliers` inliers.
     fn resect_on(&self, n: usize, min_inliers: usize) -> Option<Pose> {
-        if n < min_inliers {
-            return None;
-        }
         let mut rcfg = self.cfg.resection;
         rcfg.threshold_mm = 3.0 * self.cfg.sigma_px * self.cfg.rig.left.pixel_size_mm[0];
+        rcfg.min_inliers = min_inliers;
         let r = resect(&self.corr[..n], self.cfg.rig.left.focal_mm, &rcfg).ok()?;
         (r.inliers >= min_inliers).then_some(r.pose)
     }
