@@ -13,10 +13,18 @@
 //! - Base length (seed 000 eq. 44): `|C_R - C_L| - B`. With the right camera
 //!   following the rig, `C_R - C_L = M_L^T b` and the rotation keeps lengths, so
 //!   it is `|b| - B` with gradient `b/|b|`; it matters when the rig is estimated.
-//! - Motion smoothness (seed 002's velocity constraint, as constant velocity):
-//!   `(C_{k+1} - C_k)/dt_1 - (C_k - C_{k-1})/dt_0 = 0` per axis, sigma in m/s.
+//! - Motion smoothness (seed 002's velocity constraint, as constant velocity in the
+//!   camera's own frame): `M_k (C_{k+1} - C_k)/dt_1 - M_{k-1} (C_k - C_{k-1})/dt_0 = 0`
+//!   per camera axis, sigma in m/s. A vehicle keeps its velocity as it sees it: in a
+//!   turn of constant rate the chord of each step turns with the camera, and tying
+//!   velocities in the object frame instead would pull every turn straight and carry
+//!   a turn's sideways velocity out of it.
 //! - Odometer distance: `|C_k - C_{k-1}| - d`.
 //! - GNSS position of the left perspective centre: `C_k - G`.
+
+use nalgebra::Vector3;
+
+use crate::camera::rotation_with_derivatives;
 
 /// Wraps an angle difference into `(-pi, pi]`.
 pub fn wrap_angle(a: f64) -> f64 {
@@ -58,14 +66,27 @@ pub fn distance(c0: &[f64; 3], c1: &[f64; 3], d: f64) -> (f64, [f64; 3]) {
     base_length(&diff, d)
 }
 
-/// Smoothness residual (change of velocity, m/s) for centres `c0, c1, c2` at
-/// intervals `dt0 = t1 - t0`, `dt1 = t2 - t1`, with the scalar coefficients of
-/// `c0, c1, c2` (the Jacobian of each axis is the coefficient times identity).
-pub fn smoothness(c: [&[f64; 3]; 3], dt0: f64, dt1: f64) -> ([f64; 3], [f64; 3]) {
-    let k = [1.0 / dt0, -(1.0 / dt0 + 1.0 / dt1), 1.0 / dt1];
-    let mut r = [0.0; 3];
-    for (a, ra) in r.iter_mut().enumerate() {
-        *ra = k[0] * c[0][a] + k[1] * c[1][a] + k[2] * c[2][a];
+/// Smoothness residual (change of velocity in the camera frame, m/s) of three
+/// epochs' parameters `[omega, phi, kappa, X0, Y0, Z0]` at intervals
+/// `dt0 = t1 - t0`, `dt1 = t2 - t1`, with its Jacobian: one row per camera axis, over
+/// the three epochs' six parameters (the last epoch's angles do not enter).
+pub fn smoothness(p: [&[f64; 6]; 3], dt0: f64, dt1: f64) -> ([f64; 3], [[f64; 18]; 3]) {
+    let (m0, dm0) = rotation_with_derivatives(p[0][0], p[0][1], p[0][2]);
+    let (m1, dm1) = rotation_with_derivatives(p[1][0], p[1][1], p[1][2]);
+    let centre = |e: usize| Vector3::new(p[e][3], p[e][4], p[e][5]);
+    // Velocities over the two intervals, in the object frame.
+    let v0 = (centre(1) - centre(0)) / dt0;
+    let v1 = (centre(2) - centre(1)) / dt1;
+    let r = m1 * v1 - m0 * v0;
+    let mut jac = [[0.0; 18]; 3];
+    for (a, row) in jac.iter_mut().enumerate() {
+        for q in 0..3 {
+            row[q] = -(dm0[q] * v0)[a];
+            row[6 + q] = (dm1[q] * v1)[a];
+            row[3 + q] = m0[(a, q)] / dt0;
+            row[9 + q] = -m1[(a, q)] / dt1 - m0[(a, q)] / dt0;
+            row[15 + q] = m1[(a, q)] / dt1;
+        }
     }
-    (r, k)
+    ([r[0], r[1], r[2]], jac)
 }

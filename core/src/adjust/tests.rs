@@ -230,17 +230,34 @@ fn constraint_jacobians_match_central_differences() {
             let num = (distance(&cp, &b, 1.0).0 - distance(&cm, &b, 1.0).0) / (2.0 * h);
             assert!(close(num, -gd[k], 1e-6));
         }
-        // Smoothness is linear: coefficients are its exact derivatives.
-        let cs = [c0, b, [1.0, 2.0, 3.0]];
-        let (r, k) = smoothness([&cs[0], &cs[1], &cs[2]], 0.5, 0.25);
-        for a in 0..3 {
-            assert!(close(
-                r[a],
-                k[0] * cs[0][a] + k[1] * cs[1][a] + k[2] * cs[2][a],
-                1e-12
-            ));
+        // Smoothness: every partial over the three epochs' parameters.
+        let mut p = [[0.0; 6]; 3];
+        for pe in p.iter_mut() {
+            for (q, v) in pe.iter_mut().enumerate() {
+                *v = if q < 3 {
+                    rng.uniform(-1.5, 1.5)
+                } else {
+                    rng.uniform(-5.0, 5.0)
+                };
+            }
         }
-        assert!(close(k[0] + k[1] + k[2], 0.0, 1e-12));
+        let (dt0, dt1) = (0.1, 0.15);
+        let (_, jac) = smoothness([&p[0], &p[1], &p[2]], dt0, dt1);
+        for col in 0..18 {
+            let (mut pp, mut pm) = (p, p);
+            pp[col / 6][col % 6] += h;
+            pm[col / 6][col % 6] -= h;
+            let rp = smoothness([&pp[0], &pp[1], &pp[2]], dt0, dt1).0;
+            let rm = smoothness([&pm[0], &pm[1], &pm[2]], dt0, dt1).0;
+            for a in 0..3 {
+                let num = (rp[a] - rm[a]) / (2.0 * h);
+                assert!(
+                    close(num, jac[a][col], 1e-5),
+                    "row {a} col {col}: {num} vs {}",
+                    jac[a][col]
+                );
+            }
+        }
     }
     // Seed 000 App. B: dB/dX1 = (X1 - X2)/B.
     let (e, g) = distance(&[0.0, 0.0, 0.0], &[0.3, 0.4, 0.0], 0.4);
