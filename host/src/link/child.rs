@@ -30,22 +30,23 @@ pub fn firmware_binary() -> anyhow::Result<PathBuf> {
     )
 }
 
-/// The command that starts the firmware, and its name for messages: the
-/// dedicated binary when [`firmware_binary`] finds it, else this very program as
-/// `phototraverse firmware` (the same no_std loop, hosted), so the `phototraverse`
-/// binary alone can play both ends of the link.
+/// The command that starts the firmware, and its name for messages:
+/// `$PHOTOTRAVERSE_FIRMWARE` when set; else this very program as `phototraverse
+/// firmware` (the same no_std loop, hosted), which is always the build that runs the
+/// host: a dedicated binary found beside it may be older (`cargo build -p
+/// phototraverse-host` does not rebuild it) and would answer with its own behaviour
+/// without a word; else, from another program (a test binary), the dedicated binary
+/// beside it ([`firmware_binary`]).
 pub fn firmware_command() -> anyhow::Result<(Command, String)> {
-    let missing = match firmware_binary() {
-        Ok(bin) => return Ok((Command::new(&bin), bin.display().to_string())),
-        Err(e) => e,
-    };
     let exe = std::env::current_exe().context("locating the running executable")?;
-    if exe.file_stem().and_then(|s| s.to_str()) != Some("phototraverse") {
-        return Err(missing);
+    let own = exe.file_stem().and_then(|s| s.to_str()) == Some("phototraverse");
+    if own && std::env::var_os("PHOTOTRAVERSE_FIRMWARE").is_none() {
+        let mut cmd = Command::new(&exe);
+        cmd.arg("firmware");
+        return Ok((cmd, format!("{} firmware", exe.display())));
     }
-    let mut cmd = Command::new(&exe);
-    cmd.arg("firmware");
-    Ok((cmd, format!("{} firmware", exe.display())))
+    let bin = firmware_binary()?;
+    Ok((Command::new(&bin), bin.display().to_string()))
 }
 
 /// Arguments passed to every spawned firmware.

@@ -64,7 +64,8 @@ pub enum FirmwareProcessor {
 /// Link options of the rig emulation (flatten into a command with `#[command(flatten)]`).
 #[derive(clap::Args, Debug, Clone)]
 pub struct LinkOptions {
-    /// Link to the firmware: inproc, child (the firmware binary over pipes), tcp (start the
+    /// Link to the firmware: inproc, child (this program as `phototraverse firmware` over
+    /// pipes; $PHOTOTRAVERSE_FIRMWARE names another firmware binary), tcp (start the
     /// firmware on 127.0.0.1), tcp:ADDR, serial:DEV.
     #[arg(long, default_value = "child")]
     pub link: LinkKind,
