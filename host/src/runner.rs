@@ -485,6 +485,7 @@ fn flag_note(f: u32) -> Option<String> {
         (flags::BAD_IMAGE, "image refused"),
         (flags::CAPACITY, "capacity reached"),
         (flags::RELOCALIZED, "relocalized"),
+        (flags::ROTATION_FROM_MATCHES, "rotation from matches"),
         (flags::CALIBRATION_CORRECTED, "calibration corrected"),
     ];
     let words: Vec<&str> = names

@@ -723,6 +723,17 @@ impl<'a> Matcher<'a> {
         })
     }
 
+    /// After an accepted epoch: every previous left keypoint (of the first `n_prev`) that
+    /// the left temporal pass found again, as (previous index, current index), stereo
+    /// match or not: the material of a rotation when even the relocalization fails.
+    pub fn temporal_left(&self, n_prev: usize) -> impl Iterator<Item = (usize, u32)> + '_ {
+        let n = n_prev.min(self.left_temporal.len());
+        (0..n).filter_map(move |i| {
+            let c = self.left_temporal[i];
+            (c != NONE).then_some((i, c))
+        })
+    }
+
     /// The tie points of the last accepted epoch.
     pub fn tie_points(&self) -> impl Iterator<Item = TiePoint> + '_ {
         let epoch = self.epoch;

@@ -23,6 +23,13 @@ use super::{Refined, TrackPoint};
 /// 1.3 deg off that no later epoch corrected.
 pub const RELOCALIZATION_MIN_INLIERS: usize = 8;
 
+/// Largest image distance (pixels) between a previous keypoint's ray, turned by the
+/// rotation from the temporal matches, and its current keypoint: beyond it the point
+/// is near enough for the step's parallax to show, or a wrong match (`traverse::turn`).
+pub const TURN_THRESHOLD_PX: f64 = 3.0;
+/// RANSAC samples of that rotation (pairs of matches).
+pub const TURN_SAMPLES: u32 = 64;
+
 /// Tie points per epoch at most (the spreading keeps the best spread ones).
 pub const MAX_TIE_POINTS: usize = 400;
 /// SIFT pending candidates per image column, over [`PENDING_SCALE`]: 2048 at 640 px.

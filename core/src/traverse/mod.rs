@@ -21,6 +21,7 @@ pub mod config;
 pub mod motion;
 pub mod output;
 pub mod patches;
+pub mod turn;
 
 #[cfg(test)]
 mod tests;
@@ -34,7 +35,7 @@ use crate::adjust::{
     intersect, resect, AdjustError, Camera, Correspondence, Observation, Ray, Window,
 };
 use crate::budget::{Arena, OutOfMemory};
-use crate::camera::Pose;
+use crate::camera::{angles_from_rotation, Pose};
 use crate::features::FeatureSet;
 use crate::image::ImageView;
 use crate::matching::refine::{
@@ -48,6 +49,7 @@ use crate::sift::{Sift, SiftError};
 use area::AreaTie;
 use bytemuck::{Pod, Zeroable};
 use motion::predict;
+use nalgebra::Vector3;
 use patches::{PatchInfo, Patches};
 
 /// Microsecond time source for the per-stage timings (the DWT cycle counter on a
@@ -606,13 +608,20 @@ impl<'a> Traverse<'a> {
                 out.flags |= flags::RELOCALIZED;
             }
         }
+        // Without a resection the prediction stands, its rotation corrected from the
+        // temporal matches when they tell it; an epoch flagged below is tied to it.
+        let mut guess = *prediction;
+        if !first && resected.is_none() {
+            out.flags |= flags::NO_RESECTION;
+            if let Some(pose) = self.rotation_from_matches(prediction) {
+                out.flags |= flags::ROTATION_FROM_MATCHES;
+                guess = pose;
+            }
+        }
         let initial = match resected {
             Some(pose) => pose,
             None if first => self.cfg.datum,
-            None => {
-                out.flags |= flags::NO_RESECTION;
-                *prediction
-            }
+            None => guess,
         };
         let ta = clock.now_us();
         self.track_by_area(left, right, (&initial, resected.is_some()));
@@ -640,7 +649,7 @@ impl<'a> Traverse<'a> {
             // Continuity from the motion prediction; errors here only mean a NaN pose.
             let _ = self
                 .window
-                .set_pose_prior(id, prediction, self.cfg.prediction_sigmas);
+                .set_pose_prior(id, &guess, self.cfg.prediction_sigmas);
         }
         out.new_points = self.add_tie_points(id);
         let t3 = clock.now_us();
@@ -725,6 +734,50 @@ impl<'a> Traverse<'a> {
             n += 1;
         }
         self.resect_on(n, config::RELOCALIZATION_MIN_INLIERS)
+    }
+
+    /// The prediction with its rotation found from the left temporal matches
+    /// ([`turn::robust_rotation`]), when they agree on one: the previous left keypoints'
+    /// rays from the previous window epoch's pose against the current keypoints' rays.
+    fn rotation_from_matches(&mut self, prediction: &Pose) -> Option<Pose> {
+        let last = self.window.n_epochs().checked_sub(1)?;
+        let prev_pose = self.window.epoch_pose(last)?;
+        let m_prev = prev_pose.rotation();
+        let interior = self.cfg.rig.left;
+        let f = interior.focal_mm;
+        let cur = self.features[self.cur][0].keypoints();
+        let prev_kps = self.features[1 - self.cur][0].keypoints();
+        let mut n = 0;
+        for (p, c) in self.matcher.temporal_left(prev_kps.len()) {
+            if n >= self.corr.len() {
+                break;
+            }
+            let (Some(q), Some(k)) = (prev_kps.get(p), cur.get(c as usize)) else {
+                continue;
+            };
+            let [x, y] = interior.pixel_to_corrected(q.x as f64, q.y as f64);
+            let ray = m_prev.transpose() * Vector3::new(x, y, -f).normalize();
+            let xy = interior.pixel_to_corrected(k.x as f64, k.y as f64);
+            self.corr[n] = Correspondence {
+                point: [ray[0], ray[1], ray[2]],
+                xy,
+            };
+            n += 1;
+        }
+        let px = 0.5 * (interior.pixel_size_mm[0] + interior.pixel_size_mm[1]);
+        let tcfg = turn::TurnConfig {
+            threshold_rad: config::TURN_THRESHOLD_PX * px / f,
+            min_inliers: config::RELOCALIZATION_MIN_INLIERS,
+            samples: config::TURN_SAMPLES,
+        };
+        let (r, _) = turn::robust_rotation(&self.corr[..n], f, &tcfg)?;
+        let [omega, phi, kappa] = angles_from_rotation(&r);
+        Some(Pose {
+            omega,
+            phi,
+            kappa,
+            centre: prediction.centre,
+        })
     }
 
     /// Adds the epoch's tie points: observations of known points, new points by

@@ -31,6 +31,9 @@ pub mod flags {
     /// Informational: the calibration check found the calibration significantly wrong
     /// and corrected it (the rig's relative orientation and the interior orientation).
     pub const CALIBRATION_CORRECTED: u32 = 1 << 11;
+    /// Informational: neither resection posed the camera; its rotation came from the
+    /// temporal matches (`traverse::turn`), its position from the prediction.
+    pub const ROTATION_FROM_MATCHES: u32 = 1 << 12;
 
     /// Flags that make an epoch count as flagged (the informational ones do not).
     pub const FLAGGING: u32 = FEW_TIE_POINTS
