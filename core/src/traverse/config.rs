@@ -27,6 +27,9 @@ pub const RELOCALIZATION_MIN_INLIERS: usize = 8;
 /// rotation from the temporal matches, and its current keypoint: beyond it the point
 /// is near enough for the step's parallax to show, or a wrong match (`traverse::turn`).
 pub const TURN_THRESHOLD_PX: f64 = 3.0;
+/// The rotation from the temporal matches replaces the prediction's only when it
+/// explains at least this many times as many matches.
+pub const TURN_MIN_GAIN: usize = 2;
 /// RANSAC samples of that rotation (pairs of matches).
 pub const TURN_SAMPLES: u32 = 64;
 

@@ -770,7 +770,15 @@ impl<'a> Traverse<'a> {
             min_inliers: config::RELOCALIZATION_MIN_INLIERS,
             samples: config::TURN_SAMPLES,
         };
-        let (r, _) = turn::robust_rotation(&self.corr[..n], f, &tcfg)?;
+        let corr = &self.corr[..n];
+        let (r, k) = turn::robust_rotation(corr, f, &tcfg)?;
+        // Only a rotation that explains far more matches than the prediction's replaces
+        // it: where a moving vehicle fills the image, its matches agree on a rotation of
+        // their own, while the prediction's still explains the static scene.
+        let k_pred = turn::inliers(corr, f, tcfg.threshold_rad, &prediction.rotation());
+        if k < config::TURN_MIN_GAIN * k_pred {
+            return None;
+        }
         let [omega, phi, kappa] = angles_from_rotation(&r);
         Some(Pose {
             omega,

@@ -38,6 +38,33 @@ pub fn fit_rotation(
     r.iter().all(|x| x.is_finite()).then_some(r)
 }
 
+/// How many of the matches `r` (object frame to the current camera) explains within
+/// the threshold (see [`robust_rotation`] for `corr`).
+pub fn inliers(
+    corr: &[Correspondence],
+    focal_mm: f64,
+    threshold_rad: f64,
+    r: &Matrix3<f64>,
+) -> usize {
+    (0..corr.len())
+        .filter(|&i| fits(corr, focal_mm, threshold_rad, r, i))
+        .count()
+}
+
+/// Whether `r` carries match `i`'s previous ray onto its current ray within `threshold_rad`
+/// (the chord between two unit rays: the angle, for small angles).
+fn fits(
+    corr: &[Correspondence],
+    focal_mm: f64,
+    threshold_rad: f64,
+    r: &Matrix3<f64>,
+    i: usize,
+) -> bool {
+    let c = &corr[i];
+    let cur = Vector3::new(c.xy[0], c.xy[1], -focal_mm).normalize();
+    (r * Vector3::from(c.point) - cur).norm() <= threshold_rad
+}
+
 /// The rotation (object frame to the current camera) that carries the previous rays
 /// onto the current ones, and its inliers: `corr[i].point` is the previous ray in the
 /// object frame (unit), `corr[i].xy` the current corrected photo-coordinates (mm) of
@@ -54,9 +81,8 @@ pub fn robust_rotation(
     }
     let prev = |i: usize| Vector3::from(corr[i].point);
     let cur = |i: usize| Vector3::new(corr[i].xy[0], corr[i].xy[1], -focal_mm).normalize();
-    // The chord between two unit rays: the angle, for small angles.
-    let fits = |r: &Matrix3<f64>, i: usize| (r * prev(i) - cur(i)).norm() <= cfg.threshold_rad;
-    let count = |r: &Matrix3<f64>| (0..n).filter(|&i| fits(r, i)).count();
+    let fits = |r: &Matrix3<f64>, i: usize| fits(corr, focal_mm, cfg.threshold_rad, r, i);
+    let count = |r: &Matrix3<f64>| inliers(corr, focal_mm, cfg.threshold_rad, r);
     let mut rng = 0x9E37_79B9_7F4A_7C15u64;
     let mut next = || {
         rng = rng
@@ -146,6 +172,11 @@ mod tests {
         let angle = libm::acos(((err - 1.0) / 2.0).clamp(-1.0, 1.0)).to_degrees();
         assert!(angle < 0.03, "rotation off by {angle} deg");
         assert_eq!(inliers, far, "inliers {inliers}, far right matches {far}");
+        // The prediction's test: the true rotation explains the same matches, the
+        // rotation before the turn (4 degrees off) none of them.
+        let count = |r: &Matrix3<f64>| super::inliers(&corr, f, cfg.threshold_rad, r);
+        assert_eq!(count(&m_cur), far);
+        assert_eq!(count(&m_prev), 0);
         // Too few matches: no rotation.
         assert!(robust_rotation(&corr[..7], f, &cfg).is_none());
     }
