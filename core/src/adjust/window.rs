@@ -2722,6 +2722,17 @@ mod tests {
     use crate::camera::Interior;
     use std::vec;
 
+    /// Loose datum and a velocity constraint that every step pulls: the constraint
+    /// tests move the poses away from them to see each one's gradient.
+    fn sigmas() -> ConstraintSigmas {
+        ConstraintSigmas {
+            datum_angle_rad: 0.01,
+            datum_position_m: 0.01,
+            velocity_change_mps: 0.3,
+            ..ConstraintSigmas::default()
+        }
+    }
+
     /// Without points the reduced system is the full one: `rhs = -1/2 grad vTPv`.
     #[test]
     fn constraint_normal_equations_match_numerical_gradient() {
@@ -2737,11 +2748,8 @@ mod tests {
                 focal_mm: [0.03, 0.04],
             }),
             sigmas: ConstraintSigmas {
-                datum_angle_rad: 0.01,
-                datum_position_m: 0.01,
                 base_length_m: 0.002,
-                velocity_change_mps: 0.3,
-                ..ConstraintSigmas::default()
+                ..sigmas()
             },
             ..AdjustConfig::default()
         };
@@ -2819,12 +2827,7 @@ mod tests {
         let cfg = AdjustConfig {
             window: 3,
             fixed_epochs: 2,
-            sigmas: ConstraintSigmas {
-                datum_angle_rad: 0.01,
-                datum_position_m: 0.01,
-                velocity_change_mps: 0.3,
-                ..ConstraintSigmas::default()
-            },
+            sigmas: sigmas(),
             ..AdjustConfig::default()
         };
         let mut mem = vec![0u8; 1 << 20];
