@@ -311,6 +311,15 @@ pub fn rotation_with_derivatives(
     (rk * rp * rw, [rk * rp * dw, rk * dp * rw, dk * rp * rw])
 }
 
+/// The rotation `a diag(1, 1, d) b`, `d` the sign of `det(a b)`: the last step of a
+/// least-squares rotation (Kabsch, Wahba) from the orthogonal factors of an SVD, with the
+/// sign that keeps a reflection out. `None` when it is not finite.
+pub fn proper_rotation(a: &Matrix3<f64>, b: &Matrix3<f64>) -> Option<Matrix3<f64>> {
+    let d = (a * b).determinant().signum();
+    let r = a * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * b;
+    r.iter().all(|x| x.is_finite()).then_some(r)
+}
+
 /// `(omega, phi, kappa)` in radians from `M = Rk Rp Rw`, with `phi` in
 /// `[-pi/2, pi/2]`. From `m31 = sin phi`, `m32 = -cos phi sin omega`,
 /// `m33 = cos phi cos omega`, `m21 = -sin kappa cos phi`, `m11 = cos kappa cos phi`.

@@ -405,6 +405,28 @@ fn chi_square_quantiles_match_tables() {
 
 // ---------- resection ----------
 
+/// Makes the correspondences `wrong` picks outliers (x off by 0.05 to 0.3 mm, either
+/// side; y too when `both_axes`) and adds image noise of `sigma` mm to the others.
+fn add_outliers_and_noise(
+    rng: &mut Rng,
+    c: &mut [Correspondence],
+    sigma: f64,
+    wrong: impl Fn(usize) -> bool,
+    both_axes: bool,
+) {
+    for (i, ci) in c.iter_mut().enumerate() {
+        if wrong(i) {
+            ci.xy[0] += rng.uniform(0.05, 0.3) * if i % 2 == 0 { 1.0 } else { -1.0 };
+            if both_axes {
+                ci.xy[1] -= rng.uniform(0.05, 0.3);
+            }
+        } else {
+            ci.xy[0] += sigma * rng.normal();
+            ci.xy[1] += sigma * rng.normal();
+        }
+    }
+}
+
 fn resection_scene(rng: &mut Rng, n: usize, f: f64, pose: &Pose) -> Vec<Correspondence> {
     let m = pose.rotation();
     let mut out = Vec::new();
@@ -462,14 +484,7 @@ fn ransac_resection_with_outliers_and_degenerate_input() {
     let sigma = 0.0015; // 0.3 px of 5 um
     let truth = Pose::from_degrees(91.0, 1.5, -2.0, [0.4, 3.0, 1.5]);
     let mut c = resection_scene(&mut rng, 60, f, &truth);
-    for (i, ci) in c.iter_mut().enumerate() {
-        if i % 3 == 0 {
-            ci.xy[0] += rng.uniform(0.05, 0.3) * if i % 2 == 0 { 1.0 } else { -1.0 };
-        } else {
-            ci.xy[0] += sigma * rng.normal();
-            ci.xy[1] += sigma * rng.normal();
-        }
-    }
+    add_outliers_and_noise(&mut rng, &mut c, sigma, |i| i % 3 == 0, false);
     let cfg = ResectionConfig {
         threshold_mm: 4.0 * sigma,
         ..ResectionConfig::default()
@@ -523,16 +538,8 @@ fn ransac_stops_when_the_inlier_ratio_allows_and_not_before() {
     let sigma = 0.0015;
     let truth = Pose::from_degrees(90.5, -1.0, 3.0, [-0.2, 5.0, 1.4]);
     let mut c = resection_scene(&mut rng, 60, f, &truth);
-    for (i, ci) in c.iter_mut().enumerate() {
-        if i % 5 < 3 {
-            // 36 of 60 wrong by 0.05 to 0.3 mm (10 to 60 px).
-            ci.xy[0] += rng.uniform(0.05, 0.3) * if i % 2 == 0 { 1.0 } else { -1.0 };
-            ci.xy[1] -= rng.uniform(0.05, 0.3);
-        } else {
-            ci.xy[0] += sigma * rng.normal();
-            ci.xy[1] += sigma * rng.normal();
-        }
-    }
+    // 36 of 60 wrong by 0.05 to 0.3 mm (10 to 60 px).
+    add_outliers_and_noise(&mut rng, &mut c, sigma, |i| i % 5 < 3, true);
     let adaptive = ResectionConfig {
         threshold_mm: 4.0 * sigma,
         ..ResectionConfig::default()

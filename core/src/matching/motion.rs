@@ -8,7 +8,7 @@
 //! images within `threshold_px` of its observations. Image-space residuals keep far
 //! points, whose depth is poor but whose reprojection is still exact, in the test.
 
-use crate::camera::Rig;
+use crate::camera::{proper_rotation, Rig};
 use nalgebra::{Matrix3, Vector3};
 
 /// Parameters of the check.
@@ -62,9 +62,7 @@ fn kabsch(p: &[Vector3<f64>], q: &[Vector3<f64>], w: &[f64]) -> Option<Motion> {
     }
     let svd = h.svd(true, true);
     let (u, vt) = (svd.u?, svd.v_t?);
-    let v = vt.transpose();
-    let d = (v * u.transpose()).determinant().signum();
-    let r = v * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * u.transpose();
+    let r = proper_rotation(&vt.transpose(), &u.transpose())?;
     let t = cq - r * cp;
     (r.iter().chain(t.iter()).all(|x| x.is_finite())).then_some(Motion { r, t })
 }

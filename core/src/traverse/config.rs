@@ -201,7 +201,10 @@ pub const TRAVERSE_DESCRIPTOR_GRID: usize = 12;
 pub const RIG_ESTIMATION_WINDOW: usize = 8;
 
 /// Motion smoothness of the traverse: sigma of the change of velocity between
-/// consecutive steps, in the camera's frame, m/s.
+/// consecutive steps, in the camera's frame, m/s. 2 m/s per 0.1 s step (the rendered
+/// streets' 10 Hz): 0.5 held the speed too tightly where it changes (`curves@320` went
+/// from 0.29 to 0.89 % drift), 1.0 still lost more epochs on `drive@320`
+/// (bench/traverse/README.md).
 pub const TRAVERSE_VELOCITY_SIGMA: f64 = 2.0;
 
 /// DoG contrast threshold of the traverse (grey levels / 255): lower than SIFT's
@@ -262,10 +265,6 @@ impl TraverseConfig {
             estimate_rig: false,
             sigmas: ConstraintSigmas {
                 base_length_m: 1e-4,
-                // In the camera's frame and across the window's edge. 2 m/s per 0.1 s
-                // step (the rendered streets' 10 Hz): 0.5 held the speed too tightly
-                // where it changes (curves@320 went from 0.29 to 0.89 % drift), 1.0
-                // still lost more epochs on drive@320 (bench/traverse/README.md).
                 velocity_change_mps: TRAVERSE_VELOCITY_SIGMA,
                 ..ConstraintSigmas::default()
             },

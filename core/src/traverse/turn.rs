@@ -10,6 +10,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use crate::adjust::Correspondence;
+use crate::camera::proper_rotation;
 
 /// Settings of the rotation search.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -32,10 +33,7 @@ pub fn fit_rotation(
         h += b * a.transpose();
     }
     let svd = h.svd(true, true);
-    let (u, vt) = (svd.u?, svd.v_t?);
-    let d = (u * vt).determinant().signum();
-    let r = u * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * vt;
-    r.iter().all(|x| x.is_finite()).then_some(r)
+    proper_rotation(&svd.u?, &svd.v_t?)
 }
 
 /// How many of the matches `r` (object frame to the current camera) explains within
