@@ -2,7 +2,9 @@
 //! frames of each epoch into buffers carved from the arena, run the processor
 //! on every complete epoch and answer results and statistics. A bad frame
 //! costs its epoch (an Error and a LOST result), never the session.
-use crate::link::{Flow, Link, LinkBuffers, Served, Tx, RX_WINDOW, TX_MAX_PAYLOAD};
+use crate::link::{
+    Flow, Link, LinkBuffers, Served, Tx, RX_HELD_PAYLOAD, RX_WINDOW, TX_MAX_PAYLOAD,
+};
 use crate::processor::{BuildError, Clock, EpochInput, EpochProcessor, ProcessorFactory};
 use embedded_io::{Read, Write};
 use phototraverse_core::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget};
@@ -102,6 +104,7 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
             max_keypoints: self.limits.max_keypoints,
             work_bytes: self.work.len().min(u32::MAX as usize) as u32,
             link_bytes: LinkBuffers::BYTES as u32,
+            held_payload: RX_HELD_PAYLOAD as u16,
         }
     }
 
@@ -137,7 +140,7 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
     ) -> Result<Option<Configure>, P::Error> {
         let caps = self.capabilities();
         let mut refused = None;
-        let served = link.serve(port, |tx, port, seq, msg| {
+        let served = link.serve(port, &self.clock, |tx, port, seq, msg| {
             match msg {
                 Message::Hello(_) | Message::Reset(_) => {
                     tx.send(port, &Message::Capabilities(caps))?
@@ -176,7 +179,7 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
     ) -> Result<Next, P::Error> {
         let p = &config.pipeline;
         if let Err(text) = self.check_limits(config) {
-            link.tx.error(
+            link.tx(&self.clock).error(
                 port,
                 ErrorCode::ConfigInvalid,
                 u32::MAX,
@@ -188,7 +191,7 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
         let frame = frame_bytes(config);
         let mut budget = MemoryBudget::new();
         if let Err(e) = configuration_budget(&self.factory, config, &mut budget) {
-            link.tx.error(
+            link.tx(&self.clock).error(
                 port,
                 ErrorCode::ConfigInvalid,
                 u32::MAX,
@@ -199,7 +202,7 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
         }
         let capacity = self.work.len();
         if budget.total() > capacity {
-            link.tx.error(
+            link.tx(&self.clock).error(
                 port,
                 ErrorCode::ConfigTooLarge,
                 u32::MAX,
@@ -234,7 +237,7 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
                     BuildError::OutOfMemory(_) => ErrorCode::ConfigTooLarge,
                     BuildError::Invalid(_) => ErrorCode::ConfigInvalid,
                 };
-                link.tx.error(
+                link.tx(&*clock).error(
                     port,
                     code,
                     u32::MAX,
@@ -250,7 +253,7 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
             frame_bytes: 2 * frame as u32,
             capacity_bytes: capacity as u32,
         };
-        link.tx.send(port, &Message::ConfigAccepted(accepted))?;
+        link.tx(&*clock).send(port, &Message::ConfigAccepted(accepted))?;
         let mut epochs = Epochs {
             frames: [
                 FrameAssembler::new(left, p.max_width, p.max_height),
@@ -271,7 +274,9 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
             last_epoch: u32::MAX,
             points_index: 0,
         };
-        let served = link.serve(port, |tx, port, seq, msg| epochs.handle(tx, port, seq, msg))?;
+        let served = link.serve(port, &*clock, |tx, port, seq, msg| {
+            epochs.handle(tx, port, seq, msg)
+        })?;
         Ok(match served {
             Served::Exit(n) => n,
             Served::Eof => Next::Eof,
@@ -541,7 +546,7 @@ impl<Pr: EpochProcessor> Epochs<'_, '_, Pr> {
             memory_capacity: self.capacity,
             epochs_ok: self.ok,
             epochs_lost: self.lost_count,
-            link: tx.counters,
+            link: tx.counters(),
         };
         tx.send(port, &Message::Stats(stats))
     }

@@ -1,17 +1,16 @@
-//! The firmware's side of the reliable link: reads bytes, decodes packets,
-//! keeps the receive sequence (acks, rate-limited nacks, duplicates), answers
-//! link-level faults, and hands in-order messages to the application. Sending
-//! keeps sequenced packets in a go-back-N window until the host acknowledges them.
+//! The firmware's side of the link: reads the port, drives the core's reliable
+//! [`Endpoint`] and writes what it has to send. Reliability (sequencing,
+//! acknowledgements, selective repeat, time-outs) is the endpoint's; this module
+//! only moves bytes between the port and it, and hands messages to the application.
 use core::fmt::Write as _;
 use embedded_io::{Read, Write};
 use phototraverse_core::protocol::messages::{
-    nack_reason, Ack, ErrorCode, ErrorMsg, LinkCounters, Message, MessageType, Nack, MAX_ERROR_TEXT,
+    ErrorCode, ErrorMsg, LinkCounters, Message, MessageType, MAX_ERROR_TEXT,
 };
-use phototraverse_core::protocol::window::{Accept, RxSequence, TxWindow};
 use phototraverse_core::protocol::{
-    encode_packet, wire_len, DecodeError, Decoder, Header, PacketError, MAX_ENCODED, MAX_PACKET,
-    MAX_PAYLOAD,
+    wire_len, Endpoint, EndpointBuffers, EndpointConfig, Event, CRC_LEN, HEADER_LEN, MAX_ENCODED,
 };
+use phototraverse_core::traverse::Clock;
 
 /// Largest payload the firmware itself sends (results, statistics, errors).
 pub const TX_MAX_PAYLOAD: usize = 256;
@@ -19,20 +18,29 @@ pub const TX_MAX_PAYLOAD: usize = 256;
 pub const TX_SLOT: usize = wire_len(TX_MAX_PAYLOAD);
 /// Packets the firmware keeps unacknowledged.
 pub const TX_SLOTS: usize = 16;
+/// Largest payload the firmware holds when it arrives after a gap: a frame
+/// chunk of 256 bytes with its header. Larger packets are taken in order only.
+pub const RX_HELD_PAYLOAD: usize = 256 + phototraverse_core::protocol::messages::CHUNK_HEADER_LEN;
+/// Bytes of one reorder slot (a decoded packet).
+pub const RX_SLOT: usize = HEADER_LEN + RX_HELD_PAYLOAD + CRC_LEN;
+/// Packets held after a gap.
+pub const RX_SLOTS: usize = 63;
+/// Sequenced packets the host may send beyond the last acknowledgement: the
+/// one expected and those the reorder ring holds.
+pub const RX_WINDOW: u16 = RX_SLOTS as u16 + 1;
 /// Bytes read from the port at a time.
 pub const READ_CHUNK: usize = 2048;
-/// Sequenced packets the host may send beyond the last acknowledgement.
-pub const RX_WINDOW: u16 = 64;
 /// Free transmit slots needed before a sequenced packet is taken in: the most
 /// packets the application sends in answer to one message.
 const TX_RESERVE: usize = 4;
 
-/// Static storage of the link (about 29 KiB): decoder, encoder scratch, window.
+/// Static storage of the link: decoder, reorder ring, transmit window, encoder
+/// scratch and read buffer.
 pub struct LinkBuffers {
     decode: [u8; MAX_ENCODED],
-    raw: [u8; MAX_PACKET],
-    wire: [u8; MAX_ENCODED],
+    reorder: [u8; RX_SLOT * RX_SLOTS],
     window: [u8; TX_SLOT * TX_SLOTS],
+    raw: [u8; HEADER_LEN + TX_MAX_PAYLOAD + CRC_LEN],
     read: [u8; READ_CHUNK],
 }
 
@@ -40,9 +48,9 @@ impl LinkBuffers {
     pub const fn new() -> Self {
         LinkBuffers {
             decode: [0; MAX_ENCODED],
-            raw: [0; MAX_PACKET],
-            wire: [0; MAX_ENCODED],
+            reorder: [0; RX_SLOT * RX_SLOTS],
             window: [0; TX_SLOT * TX_SLOTS],
+            raw: [0; HEADER_LEN + TX_MAX_PAYLOAD + CRC_LEN],
             read: [0; READ_CHUNK],
         }
     }
@@ -56,38 +64,26 @@ impl Default for LinkBuffers {
     }
 }
 
-/// The sending half: encoder scratch and the retransmission window.
-pub struct Tx<'b> {
-    raw: &'b mut [u8],
-    wire: &'b mut [u8],
-    window: TxWindow<'b>,
-    next_seq: u16,
-    pub counters: LinkCounters,
+/// The sending side as the application sees it: queue a message, and it goes out.
+pub struct Tx<'t, 'b> {
+    ep: &'t mut phototraverse_core::protocol::endpoint::Outbound<&'b mut [u8]>,
+    clock: &'t dyn Clock,
 }
 
-impl<'b> Tx<'b> {
-    /// Sends `msg`: sequenced messages are kept for retransmission.
+impl Tx<'_, '_> {
+    /// Sends `msg` (kept for retransmission until acknowledged).
     pub fn send<P: Write>(&mut self, port: &mut P, msg: &Message) -> Result<(), P::Error> {
-        let t = msg.message_type();
-        let seq = self.next_seq;
-        let n = match encode_packet(Header { message: t, seq }, self.raw, self.wire, |p| {
-            let room = p.len().min(TX_MAX_PAYLOAD);
-            msg.emit(&mut p[..room])
-        }) {
-            Ok(n) => n,
-            // Only a programming error can get here (every firmware message fits):
-            // dropping it is better than halting the link.
-            Err(_) => return Ok(()),
-        };
-        if t.is_sequenced() {
-            if self.window.push(seq, &self.wire[..n]).is_err() {
-                // The link layer keeps TX_RESERVE slots free before delivering.
-                self.counters.unexpected += 1;
-                return Ok(());
-            }
-            self.next_seq = seq.wrapping_add(1);
+        // Full cannot happen (the endpoint keeps TX_RESERVE slots free before
+        // delivering) and TooLarge is a programming error: dropping the message
+        // is better than halting the link; the count says it happened.
+        if self.ep.send(msg).is_err() {
+            self.ep.counters.unexpected += 1;
+            return Ok(());
         }
-        port.write_all(&self.wire[..n])?;
+        let now = self.clock.now_us();
+        while let Some(bytes) = self.ep.poll_data(now) {
+            port.write_all(bytes)?;
+        }
         port.flush()
     }
 
@@ -114,21 +110,9 @@ impl<'b> Tx<'b> {
         )
     }
 
-    fn retransmit_from<P: Write>(&mut self, port: &mut P, from: u16) -> Result<(), P::Error> {
-        for pkt in self.window.unacked_from(from) {
-            port.write_all(pkt)?;
-            self.counters.retransmissions += 1;
-        }
-        port.flush()
-    }
-
-    fn has_room(&self) -> bool {
-        self.window.capacity() - self.window.len() >= TX_RESERVE
-    }
-
-    fn restart(&mut self) {
-        self.next_seq = 0;
-        self.window.reset(0);
+    /// Link figures: decoding, sequencing and retransmissions.
+    pub fn counters(&self) -> LinkCounters {
+        self.ep.counters
     }
 }
 
@@ -146,75 +130,67 @@ pub enum Served<R> {
     Eof,
 }
 
-/// The receiving half and the link state.
+/// The port side of the link: the endpoint and the read buffer.
 pub struct Link<'b> {
-    decoder: Decoder<&'b mut [u8]>,
+    ep: Endpoint<&'b mut [u8]>,
     read: &'b mut [u8],
     pos: usize,
     end: usize,
-    rx: RxSequence,
-    session: Option<u32>,
-    unacked: u16,
-    pub tx: Tx<'b>,
 }
 
 impl<'b> Link<'b> {
     pub fn new(buffers: &'b mut LinkBuffers) -> Self {
         let LinkBuffers {
             decode,
-            raw,
-            wire,
+            reorder,
             window,
+            raw,
             read,
         } = buffers;
+        let cfg = EndpointConfig {
+            tx_reserve: TX_RESERVE,
+            max_payload: TX_MAX_PAYLOAD,
+            ..EndpointConfig::default()
+        };
+        let buffers = EndpointBuffers {
+            decode: &mut decode[..],
+            reorder: &mut reorder[..],
+            reorder_slot: RX_SLOT,
+            window: &mut window[..],
+            window_slot: TX_SLOT,
+            raw: &mut raw[..],
+        };
         Link {
-            decoder: Decoder::new(decode),
+            ep: Endpoint::new(buffers, cfg),
             read,
             pos: 0,
             end: 0,
-            rx: RxSequence::new(RX_WINDOW / 2),
-            session: None,
-            unacked: 0,
-            tx: Tx {
-                raw,
-                wire,
-                window: TxWindow::new(window, TX_SLOT),
-                next_seq: 0,
-                counters: LinkCounters::default(),
-            },
         }
     }
 
-    /// Link counters: decoding, sequencing and retransmissions.
+    /// Link figures: decoding, sequencing and retransmissions.
     pub fn counters(&self) -> LinkCounters {
-        self.tx.counters
+        self.ep.tx.counters
     }
 
-    fn ack<P: Write>(
-        tx: &mut Tx,
-        rx: &RxSequence,
-        unacked: &mut u16,
-        port: &mut P,
-    ) -> Result<(), P::Error> {
-        *unacked = 0;
-        let ack = Ack {
-            next_expected: rx.expected(),
-            window: RX_WINDOW,
-        };
-        tx.send(port, &Message::Ack(ack))
+    /// The sending side, outside [`Link::serve`].
+    pub fn tx<'t>(&'t mut self, clock: &'t dyn Clock) -> Tx<'t, 'b> {
+        Tx {
+            ep: &mut self.ep.tx,
+            clock,
+        }
     }
 
-    fn nack<P: Write>(
-        tx: &mut Tx,
-        rx: &RxSequence,
-        port: &mut P,
-        reason: u8,
-    ) -> Result<(), P::Error> {
-        let nack = Nack {
-            expected: rx.expected(),
-            reason,
-        };
-        tx.send(port, &Message::Nack(nack))
+    fn transmit<P: Write>(&mut self, port: &mut P, now: u64) -> Result<(), P::Error> {
+        let mut wrote = false;
+        while let Some(bytes) = self.ep.poll_transmit(now) {
+            port.write_all(bytes)?;
+            wrote = true;
+        }
+        if wrote {
+            port.flush()?;
+        }
+        Ok(())
     }
 
     /// Reads and dispatches until `handler` exits or the port ends. `handler`
@@ -222,135 +198,78 @@ impl<'b> Link<'b> {
     pub fn serve<P, R>(
         &mut self,
         port: &mut P,
-        mut handler: impl FnMut(&mut Tx<'b>, &mut P, u16, Message<'_>) -> Result<Flow<R>, P::Error>,
+        clock: &dyn Clock,
+        mut handler: impl FnMut(&mut Tx<'_, 'b>, &mut P, u16, Message<'_>) -> Result<Flow<R>, P::Error>,
     ) -> Result<Served<R>, P::Error>
     where
         P: Read + Write,
     {
         loop {
-            if self.pos == self.end {
+            let now = clock.now_us();
+            // Messages the reorder ring already holds come out before more is read.
+            let (n, event) = self.ep.receive(now, &self.read[self.pos..self.end]);
+            self.pos += n;
+            if event.is_none() && self.pos == self.end {
                 // Probably about to block (the last read did not fill the buffer,
-                // so the port had no more): acknowledge what was delivered. After
-                // a full read more is likely waiting; acks then go every
-                // RX_WINDOW / 4 packets, so a burst costs few acks.
-                if self.unacked > 0 && self.end < self.read.len() {
-                    Self::ack(&mut self.tx, &self.rx, &mut self.unacked, port)?;
+                // so the port had no more): acknowledge what arrived. After a full
+                // read more is likely waiting, and acknowledgements go every
+                // `ack_every` packets, so a burst costs few of them.
+                if self.end < self.read.len() {
+                    self.ep.acknowledge();
                 }
+                self.transmit(port, now)?;
                 let n = port.read(self.read)?;
                 if n == 0 {
                     return Ok(Served::Eof);
                 }
                 self.pos = 0;
                 self.end = n;
-            }
-            // Statistics the application reports carry the decoder's figures
-            // (as of the previous packet: the next feed borrows the decoder).
-            let d = *self.decoder.counters();
-            self.tx.counters.packets_ok = d.packets;
-            self.tx.counters.crc_errors = d.crc_errors;
-            self.tx.counters.framing_errors = d.framing_errors + d.truncated;
-            self.tx.counters.oversized = d.oversized;
-            let (n, event) = self.decoder.feed(&self.read[self.pos..self.end]);
-            self.pos += n;
-            let Some(event) = event else { continue };
-            let packet = match event {
-                Ok(p) => p,
-                Err(e) => {
-                    self.link_fault(port, e)?;
-                    continue;
-                }
-            };
-            let seq = packet.seq();
-            let msg = match Message::parse(packet.type_byte(), packet.payload()) {
-                Ok(m) => m,
-                Err(e) => {
-                    // Intact but unusable: consume its sequence number so the stream goes on.
-                    if self.rx.accept(seq) == Accept::Deliver {
-                        self.unacked += 1;
-                        self.tx.error(
-                            port,
-                            ErrorCode::Malformed,
-                            u32::MAX,
-                            seq,
-                            format_args!("{e:?}"),
-                        )?;
-                    }
-                    continue;
-                }
-            };
-            match msg {
-                Message::Ack(a) => {
-                    self.tx.window.ack(a.next_expected);
-                    continue;
-                }
-                Message::Nack(n) => {
-                    self.tx.window.ack(n.expected);
-                    self.tx.retransmit_from(port, n.expected)?;
-                    continue;
-                }
-                Message::Hello(h) if self.session != Some(h.session) => {
-                    // A new host session: both sequence spaces restart here.
-                    self.session = Some(h.session);
-                    self.rx.reset(seq);
-                    self.tx.restart();
-                }
-                _ => {}
-            }
-            if !self.tx.has_room() {
-                // Busy: do not take it; the host retransmits after our acks free the window.
-                self.tx.counters.unexpected += 1;
                 continue;
             }
-            match self.rx.accept(seq) {
-                Accept::Deliver => {
-                    self.unacked += 1;
-                    if self.unacked >= RX_WINDOW / 4 {
-                        Self::ack(&mut self.tx, &self.rx, &mut self.unacked, port)?;
-                    }
-                    if let Flow::Exit(r) = handler(&mut self.tx, port, seq, msg)? {
-                        return Ok(Served::Exit(r));
+            let flow = match event {
+                None => Flow::Continue,
+                Some(Event::Version(v)) => {
+                    let mut tx = Tx {
+                        ep: &mut self.ep.tx,
+                        clock,
+                    };
+                    tx.error(
+                        port,
+                        ErrorCode::Version,
+                        u32::MAX,
+                        u16::MAX,
+                        format_args!(
+                            "protocol version {v} is not supported; this firmware speaks {}",
+                            phototraverse_core::protocol::PROTOCOL_VERSION
+                        ),
+                    )?;
+                    Flow::Continue
+                }
+                Some(Event::Message { .. }) => {
+                    let Endpoint { rx, tx, .. } = &mut self.ep;
+                    let mut tx = Tx { ep: tx, clock };
+                    match rx.message() {
+                        Some((seq, Ok(msg))) => handler(&mut tx, port, seq, msg)?,
+                        Some((seq, Err(e))) => {
+                            tx.error(
+                                port,
+                                ErrorCode::Malformed,
+                                u32::MAX,
+                                seq,
+                                format_args!("{e:?}"),
+                            )?;
+                            Flow::Continue
+                        }
+                        None => Flow::Continue,
                     }
                 }
-                Accept::Duplicate => {
-                    self.tx.counters.duplicates += 1;
-                    Self::ack(&mut self.tx, &self.rx, &mut self.unacked, port)?;
-                }
-                Accept::Gap { nack } => {
-                    self.tx.counters.gaps += 1;
-                    if nack {
-                        Self::nack(&mut self.tx, &self.rx, port, nack_reason::GAP)?;
-                    }
-                }
+            };
+            if let Flow::Exit(r) = flow {
+                self.transmit(port, clock.now_us())?;
+                return Ok(Served::Exit(r));
             }
-        }
-    }
-
-    fn link_fault<P: Write>(&mut self, port: &mut P, e: DecodeError) -> Result<(), P::Error> {
-        match e {
-            DecodeError::Packet(PacketError::Version(v)) => self.tx.error(
-                port,
-                ErrorCode::Version,
-                u32::MAX,
-                u16::MAX,
-                format_args!(
-                    "protocol version {v} is not supported; this firmware speaks {}",
-                    phototraverse_core::protocol::PROTOCOL_VERSION
-                ),
-            ),
-            DecodeError::Oversized | DecodeError::Packet(PacketError::Oversized) => self.tx.error(
-                port,
-                ErrorCode::Oversized,
-                u32::MAX,
-                u16::MAX,
-                format_args!("packet larger than {MAX_PAYLOAD} payload bytes dropped"),
-            ),
-            // Noise: ask for the missing packet (rate-limited), no error message per hit.
-            _ => {
-                if self.rx.corrupted() {
-                    Self::nack(&mut self.tx, &self.rx, port, nack_reason::CORRUPTED)?;
-                }
-                Ok(())
-            }
+            // Acknowledgements and resends that came due while handling.
+            self.transmit(port, now)?;
         }
     }
 }

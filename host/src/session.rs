@@ -1,19 +1,20 @@
 //! The host side of a firmware session: hello, configuration, epochs streamed
-//! as frame begin/chunk/end per camera, results and statistics collected, with
-//! go-back-N retransmission, acknowledgements and time-outs.
+//! as frame begin/chunk/end per camera, results and statistics collected. The
+//! core's reliable [`Endpoint`] does sequencing, acknowledgements, selective
+//! repeat and time-outs; the session moves bytes between it and the transport,
+//! sizes frame chunks for the line, and keeps the deadlines.
 use crate::link::{FaultCounters, LinkOptions, Transport};
 use phototraverse_core::protocol::crc::crc32;
 use phototraverse_core::protocol::messages::{
-    nack_reason, status, Ack, Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult,
-    ErrorCode, FrameBegin, FrameChunk, FrameEnd, Hello, Message, MessageType, Nack, PixelFormat,
-    Points, PointsRequest, Reset, Stats, CHUNK_HEADER_LEN,
+    status, Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult, ErrorCode,
+    FrameBegin, FrameChunk, FrameEnd, Hello, Message, MessageType, PixelFormat, Points,
+    PointsRequest, Reset, Stats, CHUNK_HEADER_LEN,
 };
-use phototraverse_core::protocol::window::{seq_diff, Accept, RxSequence};
 use phototraverse_core::protocol::{
-    wire_len, DecodeError, Decoder, Header, PacketBuffers, PacketError,
+    wire_len, Endpoint, EndpointBuffers, EndpointConfig, Event, SendError, MAX_ENCODED,
+    MAX_PACKET, MAX_PAYLOAD, PROTOCOL_VERSION,
 };
-use phototraverse_core::protocol::{MAX_ENCODED, MAX_PAYLOAD, PROTOCOL_VERSION};
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 /// Session tuning.
@@ -25,20 +26,24 @@ pub struct SessionOptions {
     pub window: usize,
     /// No answer for this long: the firmware is declared unresponsive.
     pub timeout: Duration,
-    /// Retransmission time-out (raised for slow links).
+    /// Lower bound of the retransmission time-out (raised for slow links; the
+    /// endpoint adapts it to the measured round trip above this).
     pub rto: Duration,
     /// Epochs paced at this rate; `None`: as fast as the link goes.
     pub fps: Option<f64>,
+    /// Epochs outstanding and none completed for this long: the run stops.
+    pub progress_timeout: Duration,
 }
 
 impl Default for SessionOptions {
     fn default() -> Self {
         SessionOptions {
-            chunk: 1024,
-            window: 32,
+            chunk: 256,
+            window: 64,
             timeout: Duration::from_secs(5),
-            rto: Duration::from_millis(200),
+            rto: Duration::from_millis(20),
             fps: None,
+            progress_timeout: Duration::from_secs(30),
         }
     }
 }
@@ -48,6 +53,7 @@ impl SessionOptions {
         SessionOptions {
             chunk: o.chunk,
             timeout: Duration::from_secs_f64(o.link_timeout.max(0.01)),
+            progress_timeout: Duration::from_secs_f64(o.progress_timeout.max(0.01)),
             fps: o.fps,
             ..Default::default()
         }
@@ -101,20 +107,33 @@ pub struct FirmwareError {
 pub struct LinkStats {
     pub bytes_sent: u64,
     pub bytes_received: u64,
+    /// Packets written: data, retransmissions and acknowledgements.
     pub packets_sent: u64,
     /// Frame pixel bytes handed to the link.
     pub frame_bytes: u64,
+    /// Data packets sent again (lost, or timed out).
     pub retransmitted_packets: u64,
+    /// Sent again because later packets arrived and these did not.
+    pub resent_lost: u64,
+    /// Sent again after their retransmission time-out.
+    pub resent_timeout: u64,
     pub retransmission_timeouts: u64,
-    pub nacks_received: u64,
+    pub acks_sent: u64,
     pub nacks_sent: u64,
     pub packets_received: u64,
     pub crc_errors: u64,
     pub framing_errors: u64,
     pub oversized: u64,
     pub version_errors: u64,
+    /// Decoding resumed at a delimiter after a damaged run (CRC, framing, oversized).
+    pub resyncs: u64,
+    /// Firmware packets held after a gap until it was filled.
+    pub held: u64,
     pub duplicates: u64,
-    pub gaps: u64,
+    /// Frame bytes per chunk at the end (the session shrinks chunks on a noisy line).
+    pub chunk_bytes: usize,
+    /// Fraction of our packets the firmware received damaged (recent, decayed).
+    pub damage_rate: f32,
     pub faults: Option<[FaultCounters; 2]>,
 }
 
@@ -122,17 +141,22 @@ impl LinkStats {
     /// One line for people: what the link did, to say why a run stopped.
     pub fn summary(&self) -> String {
         format!(
-            "{} packets sent ({} retransmitted, {} retransmission time-outs, {} NACKs received), \
-             {} received ({} CRC errors, {} framing errors, {} oversized, {} gaps)",
+            "{} packets sent ({} retransmitted: {} lost, {} timed out; {} retransmission \
+             time-outs; chunks of {} bytes, {:.1} % of them damaged), {} received ({} CRC \
+             errors, {} framing errors, {} oversized, {} resynchronisations, {} held after a gap)",
             self.packets_sent,
             self.retransmitted_packets,
+            self.resent_lost,
+            self.resent_timeout,
             self.retransmission_timeouts,
-            self.nacks_received,
+            self.chunk_bytes,
+            100.0 * self.damage_rate,
             self.packets_received,
             self.crc_errors,
             self.framing_errors,
             self.oversized,
-            self.gaps,
+            self.resyncs,
+            self.held,
         )
     }
 }
@@ -163,6 +187,15 @@ pub enum SessionError {
         "the firmware keeps announcing more tie points without sending any ({rounds} requests)"
     )]
     PointsStalled { rounds: u32 },
+    #[error(
+        "no epoch completed for {secs:.1} s over {link} ({pending} epochs outstanding); link: {summary}"
+    )]
+    NoProgress {
+        secs: f64,
+        link: String,
+        pending: usize,
+        summary: String,
+    },
 }
 
 /// Everything a session collected.
@@ -209,8 +242,6 @@ enum Incoming {
     Stats(Stats),
     Points(Box<Points>),
     Error(FirmwareError, ErrorCode),
-    Ack(Ack),
-    Nack(Nack),
     Other(MessageType),
 }
 
@@ -230,41 +261,36 @@ impl Incoming {
                 },
                 e.code,
             ),
-            Message::Ack(a) => Incoming::Ack(a),
-            Message::Nack(n) => Incoming::Nack(n),
             other => Incoming::Other(other.message_type()),
         }
     }
 }
 
-// Short-lived (one per decoded packet): the size of a Result with its rig block is fine.
-#[allow(clippy::large_enum_variant)]
-enum Event {
-    Packet(u16, MessageType, Incoming),
-    Malformed(u16),
-    Fault(DecodeError),
-}
+/// Smallest frame chunk the session shrinks to on a noisy line.
+const MIN_CHUNK: usize = 32;
+/// Unacknowledged packets the host keeps at most.
+const HOST_WINDOW_SLOTS: usize = 64;
+/// Bytes written before the transport is flushed.
+const FLUSH_BYTES: usize = 64 * 1024;
 
 /// The host side of one session over a transport.
 pub struct Session<T: Transport> {
     t: T,
     opts: SessionOptions,
-    decoder: Decoder<Vec<u8>>,
-    bufs: Box<PacketBuffers>,
-    window: VecDeque<(u16, Vec<u8>)>,
-    next_seq: u16,
-    rx: RxSequence,
-    delivered_unacked: u32,
+    ep: Endpoint<Vec<u8>>,
+    /// Origin of the endpoint's clock.
+    epoch0: Instant,
     unflushed: usize,
-    last_progress: Instant,
     last_heard: Instant,
+    last_nudge: Instant,
+    /// The last epoch result, or the first epoch sent after it.
+    last_result: Instant,
     started: Instant,
-    rto: Duration,
-    /// Current retransmission time-out: `rto`, doubled on each time-out.
-    backoff: Duration,
-    /// Congestion window (packets): halved on every loss, grown by one per
-    /// window of acknowledgements, so a noisy link wastes less on go-back-N.
-    cwnd: f64,
+    /// Frame bytes in the last chunk sent.
+    chunk_now: usize,
+    /// The progress deadline: the option, or more when an epoch takes longer
+    /// than that to cross a baud-limited link.
+    progress_timeout: Duration,
     capabilities: Option<Capabilities>,
     accepted: Option<ConfigAccepted>,
     config_error: Option<FirmwareError>,
@@ -287,28 +313,45 @@ impl<T: Transport> Session<T> {
         let now = Instant::now();
         t.set_write_deadline(opts.timeout);
         let chunk = opts.chunk.clamp(1, MAX_PAYLOAD - CHUNK_HEADER_LEN);
+        let window = opts.window.clamp(1, HOST_WINDOW_SLOTS);
         let mut rto = opts.rto;
         if let Some(rate) = t.bytes_per_sec() {
-            // A full window must fit through the wire before retransmitting it.
-            let window_bytes = (opts.window * wire_len(chunk + CHUNK_HEADER_LEN)) as f64;
+            // A full window must fit through the wire before anything times out.
+            let window_bytes = (window * wire_len(chunk + CHUNK_HEADER_LEN)) as f64;
             rto = rto.max(Duration::from_secs_f64(2.0 * window_bytes / rate));
         }
+        let cfg = EndpointConfig {
+            // The host answers nothing itself: it never needs transmit room to take a message.
+            tx_reserve: 0,
+            min_rto_us: rto.as_micros() as u64,
+            max_rto_us: 16 * rto.as_micros() as u64,
+            ..EndpointConfig::default()
+        };
+        let buffers = EndpointBuffers {
+            decode: vec![0u8; MAX_ENCODED],
+            reorder: vec![0u8; HOST_WINDOW_SLOTS * MAX_PACKET],
+            reorder_slot: MAX_PACKET,
+            window: vec![0u8; window * MAX_ENCODED],
+            window_slot: MAX_ENCODED,
+            raw: vec![0u8; MAX_PACKET],
+        };
         let mut s = Session {
             t,
-            opts: SessionOptions { chunk, ..opts },
-            decoder: Decoder::new(vec![0u8; MAX_ENCODED]),
-            bufs: Box::default(),
-            window: VecDeque::new(),
-            next_seq: 0,
-            rx: RxSequence::new(16),
-            delivered_unacked: 0,
+            opts: SessionOptions {
+                chunk,
+                window,
+                rto,
+                ..opts
+            },
+            ep: Endpoint::new(buffers, cfg),
+            epoch0: now,
             unflushed: 0,
-            last_progress: now,
             last_heard: now,
+            last_nudge: now,
+            last_result: now,
             started: now,
-            rto,
-            backoff: rto,
-            cwnd: opts.window as f64,
+            chunk_now: chunk,
+            progress_timeout: opts.progress_timeout,
             capabilities: None,
             accepted: None,
             config_error: None,
@@ -398,6 +441,15 @@ impl<T: Transport> Session<T> {
                 )?;
             }
         }
+        if let Some(rate) = self.t.bytes_per_sec() {
+            let bytes = epoch_wire_bytes(f.left.len(), self.opts.chunk) as f64;
+            let transfer = Duration::from_secs_f64(3.0 * bytes / rate);
+            self.progress_timeout = self.opts.progress_timeout.max(transfer);
+        }
+        if self.results.len() >= self.sent_epochs.len() {
+            // Nothing outstanding: the progress deadline starts with this epoch.
+            self.last_result = Instant::now();
+        }
         self.sent_epochs.push((f.epoch, Instant::now()));
         if let Some(aux) = f.aux {
             self.send_message(&Message::Aux(aux))?;
@@ -412,15 +464,17 @@ impl<T: Transport> Session<T> {
                 timestamp_us: f.timestamp_us,
             };
             self.send_message(&Message::FrameBegin(begin))?;
-            for (k, part) in data.chunks(self.opts.chunk).enumerate() {
-                let offset = (k * self.opts.chunk) as u32;
+            let mut offset = 0;
+            while offset < data.len() {
+                let n = self.chunk_size().min(data.len() - offset);
                 self.send_message(&Message::FrameChunk(FrameChunk {
                     epoch: f.epoch,
                     camera,
-                    offset,
-                    data: part,
+                    offset: offset as u32,
+                    data: &data[offset..offset + n],
                 }))?;
-                self.link.frame_bytes += part.len() as u64;
+                offset += n;
+                self.link.frame_bytes += n as u64;
             }
             let end = FrameEnd {
                 epoch: f.epoch,
@@ -431,6 +485,23 @@ impl<T: Transport> Session<T> {
             self.send_message(&Message::FrameEnd(end))?;
         }
         self.flush()
+    }
+
+    /// Frame bytes for the next chunk: at most the option's size, and small enough
+    /// for the firmware to hold the chunk when it arrives after a gap (so a loss
+    /// costs one packet); on a line that damages packets, the size with the best
+    /// goodput for the damage rate the firmware reports.
+    fn chunk_size(&mut self) -> usize {
+        let held = self
+            .capabilities
+            .map_or(usize::MAX, |c| c.held_payload as usize);
+        let max = self
+            .opts
+            .chunk
+            .min(held.saturating_sub(CHUNK_HEADER_LEN))
+            .max(MIN_CHUNK);
+        self.chunk_now = self.ep.tx.advised_payload(MIN_CHUNK, max);
+        self.chunk_now
     }
 
     /// Waits until every epoch sent has its result (processed or lost) and
@@ -498,14 +569,28 @@ impl<T: Transport> Session<T> {
     }
 
     pub fn link_stats(&self) -> LinkStats {
-        let d = self.decoder.counters();
+        let d = self.ep.rx.decoder_counters();
+        let sent = self.ep.tx.sent;
         LinkStats {
+            bytes_sent: sent.bytes,
+            packets_sent: sent.packets,
+            retransmitted_packets: sent.resent_lost + sent.resent_timeout,
+            resent_lost: sent.resent_lost,
+            resent_timeout: sent.resent_timeout,
+            retransmission_timeouts: sent.timeouts,
+            acks_sent: sent.acks,
+            nacks_sent: sent.nacks,
             packets_received: d.packets as u64,
             crc_errors: d.crc_errors as u64,
             framing_errors: (d.framing_errors + d.truncated) as u64,
             oversized: d.oversized as u64,
             version_errors: d.version_errors as u64,
+            resyncs: (d.crc_errors + d.framing_errors + d.truncated + d.oversized) as u64,
+            held: self.ep.rx.held as u64,
+            duplicates: self.ep.rx.duplicates as u64,
             bytes_received: d.bytes,
+            chunk_bytes: self.chunk_now,
+            damage_rate: self.ep.tx.damage_rate(),
             faults: self.t.fault_counters(),
             ..self.link.clone()
         }
@@ -569,46 +654,75 @@ impl<T: Transport> Session<T> {
 
     /// Sends one sequenced message (waiting for window room); returns its sequence number.
     pub fn send_message(&mut self, msg: &Message) -> Result<u16, SessionError> {
-        loop {
-            let limit = self.opts.window.min(
-                self.capabilities
-                    .map_or(usize::MAX, |c| c.rx_window.max(1) as usize),
-            );
-            let limit = limit.min(self.cwnd as usize).max(1);
-            if self.window.len() < limit {
-                break;
-            }
+        let limit = self.opts.window.min(
+            self.capabilities
+                .map_or(usize::MAX, |c| c.rx_window.max(1) as usize),
+        );
+        if self.ep.tx.in_flight() >= limit || self.ep.tx.room() == 0 {
             // Full: wait until a quarter of the window is free, so packets go in
             // bursts rather than one per acknowledgement.
-            let resume = limit - limit / 4;
-            while self.window.len() >= resume.max(1) {
-                self.service(self.rto / 4)?;
+            let resume = (limit - limit / 8).max(1);
+            while self.ep.tx.in_flight() >= resume || self.ep.tx.room() == 0 {
+                self.service(Duration::from_millis(20))?;
             }
         }
-        let seq = self.next_seq;
-        let wire = self.encode(msg, seq)?;
-        if self.window.is_empty() {
-            self.last_progress = Instant::now();
-        }
-        self.next_seq = seq.wrapping_add(1);
-        self.write(&wire)?;
-        self.window.push_back((seq, wire));
+        let seq = match self.ep.tx.send(msg) {
+            Ok(seq) => seq,
+            Err(SendError::TooLarge) | Err(SendError::Full) => {
+                return Err(SessionError::Encode(msg.message_type()))
+            }
+        };
+        self.transmit()?;
         Ok(seq)
     }
 
     /// Writes raw bytes to the link (for tests of the firmware's defences).
     pub fn send_raw(&mut self, bytes: &[u8]) -> Result<(), SessionError> {
-        self.write(bytes)?;
+        self.t.send(bytes).map_err(|error| SessionError::Io {
+            link: self.t.describe(),
+            error,
+        })?;
         self.flush()
     }
 
-    /// Receives and handles what arrives for up to `wait`, then runs the timers.
+    /// Microseconds on the endpoint's clock.
+    fn now_us(&self) -> u64 {
+        self.epoch0.elapsed().as_micros() as u64
+    }
+
+    /// Writes whatever the endpoint has due: acknowledgements, resends, new packets.
+    fn transmit(&mut self) -> Result<(), SessionError> {
+        let now = self.now_us();
+        while let Some(bytes) = self.ep.poll_transmit(now) {
+            self.unflushed += bytes.len();
+            if let Err(error) = self.t.send(bytes) {
+                return Err(SessionError::Io {
+                    link: self.t.describe(),
+                    error,
+                });
+            }
+        }
+        if self.unflushed >= FLUSH_BYTES {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    /// Receives and handles what arrives for up to `wait` (less when a
+    /// retransmission comes due sooner), then sends what is due.
     pub fn service(&mut self, wait: Duration) -> Result<(), SessionError> {
+        self.transmit()?;
         self.flush()?;
+        let now = self.now_us();
+        let wait = match self.ep.poll_at(now) {
+            Some(at) => wait.min(Duration::from_micros(at.saturating_sub(now))),
+            None => wait,
+        };
         match self.t.recv(wait) {
             Ok(Some(bytes)) => {
                 self.last_heard = Instant::now();
-                self.absorb(&bytes)?;
+                self.absorb(&bytes);
+                self.ep.acknowledge();
             }
             Ok(None) => {}
             Err(error) => {
@@ -618,18 +732,22 @@ impl<T: Transport> Session<T> {
                 })
             }
         }
-        if !self.window.is_empty() && self.last_progress.elapsed() > self.backoff {
-            self.link.retransmission_timeouts += 1;
-            self.cwnd = (self.cwnd / 2.0).max(2.0);
-            // Exponential back-off: a firmware busy with an epoch is not a lossy
-            // link; progress resets it.
-            self.backoff = (self.backoff * 2).min(self.rto * 16);
-            // Our acknowledgement may be what was lost: a firmware whose window is
-            // full of unacknowledged answers takes nothing new until it gets one.
-            self.send_ack()?;
-            let from = self.window.front().map(|w| w.0).unwrap_or(self.next_seq);
-            self.retransmit_from(from)?;
-            self.last_progress = Instant::now();
+        self.transmit()?;
+        self.check_progress()
+    }
+
+    /// Epochs outstanding and none completed within the progress deadline: the
+    /// line is too poor to go on (the firmware may still be answering, garbled).
+    fn check_progress(&self) -> Result<(), SessionError> {
+        let pending = self.sent_epochs.len().saturating_sub(self.results.len());
+        let quiet = self.last_result.elapsed();
+        if pending > 0 && quiet > self.progress_timeout {
+            return Err(SessionError::NoProgress {
+                secs: quiet.as_secs_f64(),
+                link: self.t.describe(),
+                pending,
+                summary: self.link_stats().summary(),
+            });
         }
         Ok(())
     }
@@ -639,12 +757,11 @@ impl<T: Transport> Session<T> {
         what: &str,
         done: impl Fn(&Self) -> bool,
     ) -> Result<(), SessionError> {
-        let mut last_nudge = Instant::now();
         loop {
             if done(self) {
                 return Ok(());
             }
-            self.service(Duration::from_millis(20).min(self.rto))?;
+            self.service(Duration::from_millis(20))?;
             let silent = self.last_heard.elapsed();
             if silent > self.opts.timeout {
                 return Err(SessionError::Timeout {
@@ -653,32 +770,14 @@ impl<T: Transport> Session<T> {
                     what: what.to_string(),
                 });
             }
-            if silent > self.backoff && last_nudge.elapsed() > self.backoff {
-                // Our window may be fine while an answer of the firmware was lost:
-                // ask it to resend from what we expect.
-                last_nudge = Instant::now();
-                self.backoff = (self.backoff * 2).min(self.rto * 16);
-                self.send_control(&Message::Nack(Nack {
-                    expected: self.rx.expected(),
-                    reason: nack_reason::TIMEOUT,
-                }))?;
-                self.link.nacks_sent += 1;
+            let rto = Duration::from_micros(self.ep.tx.rto_us());
+            if silent > rto && self.last_nudge.elapsed() > rto {
+                // An answer of the firmware may be lost and the firmware has no
+                // reason to look at its timers: ask it to resend now.
+                self.last_nudge = Instant::now();
+                self.ep.nudge();
             }
         }
-    }
-
-    fn write(&mut self, bytes: &[u8]) -> Result<(), SessionError> {
-        self.link.bytes_sent += bytes.len() as u64;
-        self.link.packets_sent += 1;
-        self.t.send(bytes).map_err(|error| SessionError::Io {
-            link: self.t.describe(),
-            error,
-        })?;
-        self.unflushed += bytes.len();
-        if self.unflushed >= 64 * 1024 {
-            self.flush()?;
-        }
-        Ok(())
     }
 
     /// Flushes the transport; also when nothing is buffered, so a transport whose
@@ -691,163 +790,39 @@ impl<T: Transport> Session<T> {
         })
     }
 
-    /// The framed bytes of `msg` with sequence number `seq`.
-    fn encode(&mut self, msg: &Message, seq: u16) -> Result<Vec<u8>, SessionError> {
-        Ok(self
-            .bufs
-            .encode(
-                Header {
-                    message: msg.message_type(),
-                    seq,
-                },
-                |p| msg.emit(p),
-            )
-            .map_err(|_| SessionError::Encode(msg.message_type()))?
-            .to_vec())
-    }
-
-    /// Unsequenced control message (ack, nack).
-    fn send_control(&mut self, msg: &Message) -> Result<(), SessionError> {
-        let seq = self.next_seq;
-        let wire = self.encode(msg, seq)?;
-        self.write(&wire)?;
-        self.flush()
-    }
-
-    fn retransmit_from(&mut self, from: u16) -> Result<(), SessionError> {
-        let packets: Vec<Vec<u8>> = self
-            .window
-            .iter()
-            .filter(|(s, _)| seq_diff(*s, from) >= 0)
-            .map(|(_, w)| w.clone())
-            .collect();
-        for p in packets {
-            self.link.retransmitted_packets += 1;
-            self.write(&p)?;
-        }
-        self.flush()
-    }
-
-    fn release(&mut self, next_expected: u16) {
-        let Some(&(base, _)) = self.window.front() else {
-            return;
-        };
-        let d = seq_diff(next_expected, base);
-        if d > 0 && d as usize <= self.window.len() {
-            self.window.drain(..d as usize);
-            self.last_progress = Instant::now();
-            self.backoff = self.rto;
-            self.cwnd = (self.cwnd + d as f64 / self.cwnd).min(self.opts.window as f64);
-        }
-    }
-
-    fn absorb(&mut self, bytes: &[u8]) -> Result<(), SessionError> {
-        let mut events = Vec::new();
+    /// Feeds received bytes to the endpoint and takes the messages it delivers.
+    fn absorb(&mut self, bytes: &[u8]) {
         let mut input = bytes;
-        while !input.is_empty() {
-            let (n, ev) = self.decoder.feed(input);
+        loop {
+            let now = self.now_us();
+            let (n, event) = self.ep.receive(now, input);
             input = &input[n..];
-            match ev {
-                None => {}
-                Some(Err(e)) => events.push(Event::Fault(e)),
-                Some(Ok(p)) => {
-                    let seq = p.seq();
-                    match Message::parse(p.type_byte(), p.payload()) {
-                        Ok(m) => events.push(Event::Packet(
-                            seq,
-                            m.message_type(),
-                            Incoming::from_message(m),
-                        )),
-                        Err(_) => events.push(Event::Malformed(seq)),
+            match event {
+                Some(Event::Message { .. }) => {
+                    let taken = self.ep.rx.message().map(|(seq, m)| {
+                        (seq, m.map(|m| (m.message_type(), Incoming::from_message(m))))
+                    });
+                    match taken {
+                        Some((_, Ok((_, msg)))) => self.apply(msg),
+                        Some((seq, Err(_))) => self.errors.push(FirmwareError {
+                            code: "Malformed".into(),
+                            epoch: None,
+                            text: format!("host could not parse the firmware's packet {seq}"),
+                        }),
+                        None => {}
                     }
                 }
+                Some(Event::Version(v)) => self.errors.push(FirmwareError {
+                    code: "Version".into(),
+                    epoch: None,
+                    text: format!(
+                        "host received a packet of protocol version {v}; it speaks {PROTOCOL_VERSION}"
+                    ),
+                }),
+                None if input.is_empty() => return,
+                None => {}
             }
         }
-        for ev in events {
-            self.handle(ev)?;
-        }
-        if self.delivered_unacked > 0 {
-            self.send_ack()?;
-        }
-        Ok(())
-    }
-
-    fn send_ack(&mut self) -> Result<(), SessionError> {
-        self.delivered_unacked = 0;
-        let ack = Ack {
-            next_expected: self.rx.expected(),
-            window: 64,
-        };
-        self.send_control(&Message::Ack(ack))
-    }
-
-    fn handle(&mut self, ev: Event) -> Result<(), SessionError> {
-        let (seq, t, msg) = match ev {
-            Event::Fault(e) => {
-                if let DecodeError::Packet(PacketError::Version(v)) = e {
-                    self.errors.push(FirmwareError {
-                        code: "Version".into(),
-                        epoch: None,
-                        text: format!("host received a packet of protocol version {v}; it speaks {PROTOCOL_VERSION}"),
-                    });
-                } else if self.rx.corrupted() {
-                    self.link.nacks_sent += 1;
-                    let nack = Nack {
-                        expected: self.rx.expected(),
-                        reason: nack_reason::CORRUPTED,
-                    };
-                    self.send_control(&Message::Nack(nack))?;
-                }
-                return Ok(());
-            }
-            Event::Malformed(seq) => {
-                if self.rx.accept(seq) == Accept::Deliver {
-                    self.delivered_unacked += 1;
-                    self.errors.push(FirmwareError {
-                        code: "Malformed".into(),
-                        epoch: None,
-                        text: format!("host could not parse the firmware's packet {seq}"),
-                    });
-                }
-                return Ok(());
-            }
-            Event::Packet(seq, t, msg) => (seq, t, msg),
-        };
-        match msg {
-            Incoming::Ack(a) => {
-                self.release(a.next_expected);
-                return Ok(());
-            }
-            Incoming::Nack(n) => {
-                self.link.nacks_received += 1;
-                self.cwnd = (self.cwnd / 2.0).max(2.0);
-                self.release(n.expected);
-                return self.retransmit_from(n.expected);
-            }
-            _ => {}
-        }
-        debug_assert!(t.is_sequenced());
-        match self.rx.accept(seq) {
-            Accept::Deliver => {
-                self.delivered_unacked += 1;
-                self.apply(msg);
-            }
-            Accept::Duplicate => {
-                self.link.duplicates += 1;
-                self.delivered_unacked += 1;
-            }
-            Accept::Gap { nack } => {
-                self.link.gaps += 1;
-                if nack {
-                    self.link.nacks_sent += 1;
-                    self.send_control(&Message::Nack(Nack {
-                        expected: self.rx.expected(),
-                        reason: nack_reason::GAP,
-                    }))?;
-                }
-            }
-        }
-        Ok(())
     }
 
     fn apply(&mut self, msg: Incoming) {
@@ -855,6 +830,7 @@ impl<T: Transport> Session<T> {
             Incoming::Capabilities(c) => self.capabilities = Some(c),
             Incoming::Accepted(a) => self.accepted = Some(a),
             Incoming::Result(r) => {
+                self.last_result = Instant::now();
                 self.result_at.insert(r.epoch, Instant::now());
                 self.results.insert(r.epoch, r);
             }
@@ -876,7 +852,6 @@ impl<T: Transport> Session<T> {
                 eprintln!("phototraverse: firmware error {}: {}", e.code, e.text);
                 self.errors.push(e);
             }
-            Incoming::Ack(_) | Incoming::Nack(_) => {}
             Incoming::Other(t) => self.errors.push(FirmwareError {
                 code: "Unexpected".into(),
                 epoch: None,

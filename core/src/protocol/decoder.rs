@@ -40,6 +40,8 @@ pub struct Decoder<B> {
     buf: B,
     len: usize,
     overflow: bool,
+    /// Length of the packet the last feed returned (0: none), still in `buf`.
+    last: usize,
     counters: DecoderCounters,
 }
 
@@ -49,6 +51,7 @@ impl<B: AsMut<[u8]>> Decoder<B> {
             buf,
             len: 0,
             overflow: false,
+            last: 0,
             counters: DecoderCounters::default(),
         }
     }
@@ -57,9 +60,18 @@ impl<B: AsMut<[u8]>> Decoder<B> {
         &self.counters
     }
 
+    /// The packet the last [`Decoder::feed`] returned, until the next feed.
+    pub fn packet(&self) -> Option<Packet<&[u8]>>
+    where
+        B: AsRef<[u8]>,
+    {
+        (self.last > 0).then(|| Packet::new_unchecked(&self.buf.as_ref()[..self.last]))
+    }
+
     /// Forgets a partial packet (after a link reset).
     pub fn clear(&mut self) {
         self.len = 0;
+        self.last = 0;
         self.overflow = false;
     }
 
@@ -67,6 +79,7 @@ impl<B: AsMut<[u8]>> Decoder<B> {
     /// returns how many were consumed and, if a delimiter closed a non-empty
     /// run, the packet or why it was dropped. Call again with the rest.
     pub fn feed<'s>(&'s mut self, input: &[u8]) -> Feed<'s> {
+        self.last = 0;
         let delim = memchr::memchr(0, input);
         let data = &input[..delim.unwrap_or(input.len())];
         let buf = self.buf.as_mut();
@@ -102,6 +115,7 @@ impl<B: AsMut<[u8]>> Decoder<B> {
         match Packet::new_checked(&buf[..n]) {
             Ok(p) => {
                 self.counters.packets += 1;
+                self.last = n;
                 (consumed, Some(Ok(p)))
             }
             Err(e) => {

@@ -262,8 +262,11 @@ pub struct Capabilities {
     pub max_keypoints: u32,
     /// Bytes of working storage the configuration must fit in.
     pub work_bytes: u32,
-    /// Bytes of link buffers (decoder, retransmission window).
+    /// Bytes of link buffers (decoder, reorder ring, retransmission window).
     pub link_bytes: u32,
+    /// Largest payload the firmware holds when it arrives after a gap; larger
+    /// packets are taken in order only, so a sender on a lossy line keeps below it.
+    pub held_payload: u16,
 }
 repr!(
     Capabilities,
@@ -281,6 +284,7 @@ repr!(
             max_keypoints: r.u32()?,
             work_bytes: r.u32()?,
             link_bytes: r.u32()?,
+            held_payload: r.u16()?,
         })
     },
     |s, w| {
@@ -295,6 +299,7 @@ repr!(
         w.u32(s.max_keypoints)?;
         w.u32(s.work_bytes)?;
         w.u32(s.link_bytes)?;
+        w.u16(s.held_payload)?;
     }
 );
 
@@ -1127,12 +1132,20 @@ repr!(
     }
 );
 
-/// Cumulative acknowledgement: every sequenced packet before `next_expected` arrived.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// Acknowledgement: every sequenced packet before `next_expected` arrived, the
+/// bitmap `sack` says which after it are held (bit `i`: `next_expected + 1 + i`),
+/// and two wrapping counters say how clean the line is from the receiver's side,
+/// which the sender uses to size its packets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Ack {
     pub next_expected: u16,
     /// Packets the receiver accepts beyond `next_expected`.
     pub window: u16,
+    pub sack: u64,
+    /// Intact packets received so far (wrapping).
+    pub received: u16,
+    /// Damaged runs (CRC, framing, oversized, truncated) received so far (wrapping).
+    pub damaged: u16,
 }
 repr!(
     Ack,
@@ -1141,15 +1154,24 @@ repr!(
         Ok(Ack {
             next_expected: r.u16()?,
             window: r.u16()?,
+            sack: r.u64()?,
+            received: r.u16()?,
+            damaged: r.u16()?,
         })
     },
     |s, w| {
         w.u16(s.next_expected)?;
         w.u16(s.window)?;
+        w.u64(s.sack)?;
+        w.u16(s.received)?;
+        w.u16(s.damaged)?;
     }
 );
 
-/// Negative acknowledgement: resend from `expected` on (go-back-N).
+/// Negative acknowledgement: resend every unacknowledged packet from `expected`
+/// on now. A host waiting for answers sends it after a retransmission time-out
+/// without input, so a firmware's lost answer comes back without the firmware's
+/// own timer.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Nack {
     pub expected: u16,
@@ -1158,11 +1180,7 @@ pub struct Nack {
 }
 
 pub mod nack_reason {
-    /// A packet after a gap arrived.
-    pub const GAP: u8 = 1;
-    /// A packet was corrupted.
-    pub const CORRUPTED: u8 = 2;
-    /// The receiver waited too long.
+    /// The receiver waited a retransmission time-out for answers.
     pub const TIMEOUT: u8 = 3;
 }
 

@@ -6,7 +6,8 @@
 //! - [`packet`]: the header view (`Packet::new_checked`, accessors) and the encoder;
 //! - [`messages`]: one repr per message with `parse`/`emit`;
 //! - [`decoder`]: the streaming decoder in fixed memory that resynchronises at delimiters;
-//! - [`window`]: go-back-N retransmission window and the in-order receiver;
+//! - [`window`]: the selective-repeat sender window and the receiver's reorder ring;
+//! - [`endpoint`]: the sans-IO reliable endpoint both sides drive (bytes in, bytes and messages out);
 //! - [`assembly`]: frames assembled from chunks into preallocated buffers.
 //!
 //! The format is documented in `docs/protocol.md`.
@@ -14,6 +15,7 @@ pub mod assembly;
 pub mod cobs;
 pub mod crc;
 pub mod decoder;
+pub mod endpoint;
 pub mod messages;
 pub mod packet;
 pub mod window;
@@ -22,6 +24,7 @@ pub mod window;
 mod tests;
 
 pub use decoder::{DecodeError, Decoder};
+pub use endpoint::{Endpoint, EndpointBuffers, EndpointConfig, Event, SendError};
 pub use messages::{Message, MessageType, Repr};
 pub use packet::{
     encode_packet, EncodeError, Header, Packet, PacketBuffers, PacketError, CRC_LEN, HEADER_LEN,

@@ -116,6 +116,19 @@ impl<T: AsRef<[u8]>> Packet<T> {
     }
 }
 
+impl<'a> Packet<&'a [u8]> {
+    /// The payload, borrowed from the buffer rather than from the view.
+    pub fn into_payload(self) -> &'a [u8] {
+        let n = self.payload_len() as usize;
+        &self.buffer[HEADER_LEN..HEADER_LEN + n]
+    }
+
+    /// The whole packet (header, payload, CRC).
+    pub fn into_inner(self) -> &'a [u8] {
+        self.buffer
+    }
+}
+
 /// The header fields of a packet to emit.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Header {

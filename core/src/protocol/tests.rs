@@ -27,6 +27,7 @@ fn sample_messages(chunk: &[u8]) -> [Message<'_>; 16] {
             max_keypoints: 4000,
             work_bytes: 16 << 20,
             link_bytes: 40_000,
+            held_payload: 265,
         }),
         Message::Configure(Configure {
             version: CONFIG_VERSION,
@@ -114,10 +115,13 @@ fn sample_messages(chunk: &[u8]) -> [Message<'_>; 16] {
         Message::Ack(Ack {
             next_expected: 65535,
             window: 32,
+            sack: 0x8000_0000_0000_0005,
+            received: 65000,
+            damaged: 17,
         }),
         Message::Nack(Nack {
             expected: 3,
-            reason: nack_reason::GAP,
+            reason: nack_reason::TIMEOUT,
         }),
         Message::Reset(Reset { reason: 1 }),
         Message::Points(sample_points()),
@@ -425,6 +429,7 @@ fn decoder_resynchronises_after_garbage_and_counts() {
     let ack = Message::Ack(Ack {
         next_expected: 5,
         window: 8,
+        ..Ack::default()
     });
     let mut at = 0;
     at += encode(&ack, 1, &mut wire[at..]);

@@ -1,9 +1,10 @@
-//! Reliability: a go-back-N sender window that keeps encoded packets until
-//! they are acknowledged, and the receiver's in-order sequencer. The receiver
-//! needs no buffer beyond the decoder's: out-of-order packets are dropped and
-//! recovered by retransmission, so a firmware pays only for its own window.
+//! Selective repeat: the sender's window of encoded packets, each with its own
+//! transmission state, and the receiver's reorder ring that holds packets that
+//! arrived after a gap. Acknowledgements carry the next expected sequence number
+//! and a bitmap of the packets held after it (SACK), so a loss costs the lost
+//! packet, not the window behind it.
 
-/// Most slots a window may have.
+/// Most slots a window or a reorder ring may have (the SACK bitmap is a `u64`).
 pub const MAX_WINDOW: usize = 64;
 
 /// `a - b` in sequence space (u16 wrap-around), as a signed distance.
@@ -11,20 +12,48 @@ pub fn seq_diff(a: u16, b: u16) -> i16 {
     a.wrapping_sub(b) as i16
 }
 
-/// The sender's retransmission window over caller storage cut in equal slots.
-pub struct TxWindow<'a> {
-    storage: &'a mut [u8],
-    slot_len: usize,
-    slots: usize,
-    lens: [u16; MAX_WINDOW],
-    /// Sequence number of the oldest unacknowledged packet.
-    base: u16,
-    /// Slot of the oldest packet: the slots are a ring from here, so any slot count
-    /// works across the sequence wrap (`seq % slots` would not: 65535 and 0 are
-    /// consecutive packets but `65535 % 5 == 0 % 5`).
-    head: usize,
-    /// Packets held (unacknowledged).
-    count: usize,
+/// Later transmissions delivered before an unacknowledged packet is declared lost
+/// without waiting for its time-out. Three, as TCP's duplicate acknowledgement
+/// threshold: the link may swap neighbouring packets, which is not a loss.
+const REORDER_THRESHOLD: u32 = 3;
+
+/// Transmission state of one held packet.
+#[derive(Debug, Clone, Copy, Default)]
+struct Slot {
+    len: u16,
+    /// Time of the last transmission, `None` before the first.
+    sent_at: Option<u64>,
+    /// Order of the last transmission among all transmissions of this window.
+    order: u32,
+    /// Transmitted more than once (its round trip says nothing: Karn's rule).
+    retransmitted: bool,
+    /// The receiver holds it (selectively acknowledged).
+    sacked: bool,
+    /// Declared lost: resend before anything new.
+    lost: bool,
+}
+
+/// What an acknowledgement did to the window.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct AckOutcome {
+    /// Packets released (cumulatively acknowledged).
+    pub released: usize,
+    /// Packets newly held by the receiver (selectively acknowledged).
+    pub sacked: usize,
+    /// Packets newly declared lost because later ones arrived.
+    pub lost: usize,
+    /// Round trip of a packet sent once and acknowledged now (µs).
+    pub rtt_us: Option<u64>,
+}
+
+/// Why a transmission was chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Transmission {
+    New,
+    /// Resent because later packets arrived and this one did not.
+    Lost,
+    /// Resent because its retransmission time-out expired.
+    TimedOut,
 }
 
 /// A packet could not be held.
@@ -33,14 +62,31 @@ pub enum WindowError {
     Full,
     /// The encoded packet is larger than a slot.
     TooLarge,
-    /// The sequence number is not the next one after those held.
-    OutOfSequence,
 }
 
-impl<'a> TxWindow<'a> {
+/// The sender's selective-repeat window over caller storage cut in equal slots.
+pub struct TxWindow<B> {
+    storage: B,
+    slot_len: usize,
+    slots: usize,
+    state: [Slot; MAX_WINDOW],
+    /// Sequence number of the oldest unacknowledged packet.
+    base: u16,
+    /// Slot of the oldest packet: the slots are a ring from here, so any slot count
+    /// works across the sequence wrap (`seq % slots` would not: 65535 and 0 are
+    /// consecutive packets but `65535 % 5 == 0 % 5`).
+    head: usize,
+    /// Packets held (unacknowledged).
+    count: usize,
+    /// Transmissions so far (the order of the next one).
+    transmissions: u32,
+}
+
+impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
     /// A window of `storage.len() / slot_len` slots (at most [`MAX_WINDOW`]).
-    pub fn new(storage: &'a mut [u8], slot_len: usize) -> Self {
+    pub fn new(storage: B, slot_len: usize) -> Self {
         let slots = storage
+            .as_ref()
             .len()
             .checked_div(slot_len)
             .unwrap_or(0)
@@ -49,15 +95,21 @@ impl<'a> TxWindow<'a> {
             storage,
             slot_len,
             slots,
-            lens: [0; MAX_WINDOW],
+            state: [Slot::default(); MAX_WINDOW],
             base: 0,
             head: 0,
             count: 0,
+            transmissions: 0,
         }
     }
 
     pub fn capacity(&self) -> usize {
         self.slots
+    }
+
+    /// Largest encoded packet a slot holds.
+    pub fn slot_len(&self) -> usize {
+        self.slot_len
     }
 
     pub fn len(&self) -> usize {
@@ -77,6 +129,11 @@ impl<'a> TxWindow<'a> {
         self.base
     }
 
+    /// Sequence number the next packet pushed gets.
+    pub fn next_seq(&self) -> u16 {
+        self.base.wrapping_add(self.count as u16)
+    }
+
     /// Forgets everything and restarts at `next_seq`.
     pub fn reset(&mut self, next_seq: u16) {
         self.base = next_seq;
@@ -89,77 +146,242 @@ impl<'a> TxWindow<'a> {
         (self.head + k) % self.slots
     }
 
-    /// Holds the encoded packet `bytes` sent with sequence number `seq`.
-    pub fn push(&mut self, seq: u16, bytes: &[u8]) -> Result<(), WindowError> {
+    /// Holds a packet with the next sequence number, written by `encode` into the
+    /// slot (it returns the bytes written); returns that sequence number.
+    pub fn push_with<E>(
+        &mut self,
+        encode: impl FnOnce(u16, &mut [u8]) -> Result<usize, E>,
+    ) -> Result<Result<u16, E>, WindowError> {
         if self.is_full() {
             return Err(WindowError::Full);
         }
+        let seq = self.next_seq();
+        let i = self.slot_at(self.count);
+        let start = i * self.slot_len;
+        let slot = &mut self.storage.as_mut()[start..start + self.slot_len];
+        let n = match encode(seq, slot) {
+            Ok(n) => n,
+            Err(e) => return Ok(Err(e)),
+        };
+        if n > self.slot_len {
+            return Err(WindowError::TooLarge);
+        }
+        self.state[i] = Slot {
+            len: n as u16,
+            ..Slot::default()
+        };
+        self.count += 1;
+        Ok(Ok(seq))
+    }
+
+    /// Holds the encoded packet `bytes`; returns its sequence number.
+    pub fn push(&mut self, bytes: &[u8]) -> Result<u16, WindowError> {
         if bytes.len() > self.slot_len {
             return Err(WindowError::TooLarge);
         }
-        if seq != self.base.wrapping_add(self.count as u16) {
-            return Err(WindowError::OutOfSequence);
-        }
-        let i = self.slot_at(self.count);
-        let start = i * self.slot_len;
-        self.storage[start..start + bytes.len()].copy_from_slice(bytes);
-        self.lens[i] = bytes.len() as u16;
-        self.count += 1;
-        Ok(())
-    }
-
-    /// Releases every packet before `next_expected`; returns how many. Stale or
-    /// bogus acknowledgements (outside the window) release nothing.
-    pub fn ack(&mut self, next_expected: u16) -> usize {
-        let d = seq_diff(next_expected, self.base);
-        if d <= 0 || d as usize > self.count {
-            return 0;
-        }
-        self.base = next_expected;
-        self.head = self.slot_at(d as usize);
-        self.count -= d as usize;
-        d as usize
-    }
-
-    /// The held packets from `from` (or the oldest when `from` is older) in order.
-    pub fn unacked_from(&self, from: u16) -> impl Iterator<Item = &[u8]> + '_ {
-        let skip = seq_diff(from, self.base).clamp(0, self.count as i16) as usize;
-        (skip..self.count).map(move |k| {
-            let i = self.slot_at(k);
-            let start = i * self.slot_len;
-            &self.storage[start..start + self.lens[i] as usize]
+        self.push_with(|_, slot| {
+            slot[..bytes.len()].copy_from_slice(bytes);
+            Ok::<_, ()>(bytes.len())
         })
+        .map(|r| r.unwrap_or(0))
+    }
+
+    /// Applies an acknowledgement: every packet before `next_expected` is
+    /// released, and bit `i` of `sack` says the receiver holds `next_expected + 1 + i`.
+    /// Stale or bogus acknowledgements (outside the window) release nothing.
+    pub fn ack(&mut self, now: u64, next_expected: u16, sack: u64) -> AckOutcome {
+        let mut out = AckOutcome::default();
+        let mut latest = None::<u32>;
+        let mut note = |s: &Slot, out: &mut AckOutcome| {
+            if let Some(t) = s.sent_at {
+                latest = Some(latest.map_or(s.order, |l: u32| l.max(s.order)));
+                if !s.retransmitted && out.rtt_us.is_none() {
+                    out.rtt_us = Some(now.saturating_sub(t));
+                }
+            }
+        };
+        let d = seq_diff(next_expected, self.base);
+        if d > 0 && d as usize <= self.count {
+            for k in 0..d as usize {
+                let s = self.state[self.slot_at(k)];
+                if !s.sacked {
+                    note(&s, &mut out);
+                }
+            }
+            self.base = next_expected;
+            self.head = self.slot_at(d as usize);
+            self.count -= d as usize;
+            out.released = d as usize;
+        }
+        // The bitmap is relative to `next_expected`, which may lag our base (an old ack).
+        let offset = seq_diff(self.base, next_expected);
+        if (0..=MAX_WINDOW as i16).contains(&offset) {
+            for k in 0..self.count {
+                let bit = k as i16 + offset - 1;
+                if !(0..64).contains(&bit) || sack & (1u64 << bit) == 0 {
+                    continue;
+                }
+                let i = self.slot_at(k);
+                if !self.state[i].sacked && self.state[i].sent_at.is_some() {
+                    let s = self.state[i];
+                    note(&s, &mut out);
+                    self.state[i].sacked = true;
+                    self.state[i].lost = false;
+                    out.sacked += 1;
+                }
+            }
+        }
+        if let Some(latest) = latest {
+            out.lost = self.mark_lost(latest);
+        }
+        out
+    }
+
+    /// Declares lost the packets sent enough transmissions before the latest one
+    /// delivered; with fewer packets in flight after it, any later delivery will do.
+    fn mark_lost(&mut self, latest_delivered: u32) -> usize {
+        let mut lost = 0;
+        for k in 0..self.count {
+            let i = self.slot_at(k);
+            let s = &mut self.state[i];
+            if s.sacked || s.lost || s.sent_at.is_none() {
+                continue;
+            }
+            let after = self.transmissions.wrapping_sub(s.order).saturating_sub(1);
+            let delivered_after = latest_delivered.wrapping_sub(s.order) as i32;
+            if delivered_after >= REORDER_THRESHOLD.min(after.max(1)) as i32 {
+                s.lost = true;
+                lost += 1;
+            }
+        }
+        lost
+    }
+
+    /// The next packet to put on the wire at `now`: lost packets first, then
+    /// packets whose time-out `rto` expired, then new ones. Records the transmission.
+    pub fn next_transmission(&mut self, now: u64, rto: u64) -> Option<(Transmission, u16, &[u8])> {
+        let mut pick = None;
+        for k in 0..self.count {
+            let s = &self.state[self.slot_at(k)];
+            if s.sacked {
+                continue;
+            }
+            let why = match s.sent_at {
+                None => Transmission::New,
+                Some(_) if s.lost => Transmission::Lost,
+                Some(t) if now.saturating_sub(t) >= rto => Transmission::TimedOut,
+                Some(_) => continue,
+            };
+            let rank = |w: Transmission| match w {
+                Transmission::Lost => 0,
+                Transmission::TimedOut => 1,
+                Transmission::New => 2,
+            };
+            if pick.map_or(true, |(_, w)| rank(why) < rank(w)) {
+                pick = Some((k, why));
+                if why == Transmission::Lost {
+                    break;
+                }
+            }
+        }
+        let (k, why) = pick?;
+        let i = self.slot_at(k);
+        let s = &mut self.state[i];
+        s.retransmitted |= why != Transmission::New;
+        s.sent_at = Some(now);
+        s.lost = false;
+        s.order = self.transmissions;
+        self.transmissions = self.transmissions.wrapping_add(1);
+        let start = i * self.slot_len;
+        let seq = self.base.wrapping_add(k as u16);
+        Some((why, seq, &self.storage.as_ref()[start..start + s.len as usize]))
+    }
+
+    /// The encoded bytes of the held packet `seq`, if it is still held.
+    pub fn packet(&self, seq: u16) -> Option<&[u8]> {
+        let k = seq_diff(seq, self.base);
+        if k < 0 || k as usize >= self.count {
+            return None;
+        }
+        let i = self.slot_at(k as usize);
+        let start = i * self.slot_len;
+        Some(&self.storage.as_ref()[start..start + self.state[i].len as usize])
+    }
+
+    /// Earliest time a sent packet's time-out `rto` expires, if any is in flight.
+    pub fn next_timeout(&self, rto: u64) -> Option<u64> {
+        (0..self.count)
+            .map(|k| self.state[self.slot_at(k)])
+            .filter(|s| !s.sacked)
+            .filter_map(|s| s.sent_at.map(|t| t.saturating_add(rto)))
+            .min()
+    }
+
+    /// Whether a packet waits to be sent or resent without a timer.
+    pub fn has_due(&self) -> bool {
+        (0..self.count)
+            .map(|k| self.state[self.slot_at(k)])
+            .any(|s| !s.sacked && (s.sent_at.is_none() || s.lost))
+    }
+
+    /// Marks every packet in flight from `from` on as lost (the receiver asked
+    /// for them again).
+    pub fn resend_from(&mut self, from: u16) {
+        let skip = seq_diff(from, self.base).clamp(0, self.count as i16) as usize;
+        for k in skip..self.count {
+            let i = self.slot_at(k);
+            let s = &mut self.state[i];
+            if !s.sacked && s.sent_at.is_some() {
+                s.lost = true;
+            }
+        }
     }
 }
 
-/// What the receiver does with a sequenced packet.
+/// What the receiver did with a sequenced packet.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Accept {
-    /// The next one: deliver it.
+    /// The next one: deliver it now.
     Deliver,
-    /// Already delivered: drop it, acknowledge again.
+    /// After a gap: kept in the reorder ring until the gap is filled.
+    Held,
+    /// Already delivered or already held: dropped.
     Duplicate,
-    /// Something before it is missing: drop it; `nack` says whether to ask for
-    /// a retransmission now (rate-limited).
-    Gap { nack: bool },
+    /// Too far ahead for the ring (or larger than a slot): dropped, to be resent.
+    Beyond,
 }
 
-/// The receiver's in-order sequencer with a rate-limited negative acknowledgement.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct RxSequence {
+/// The receiver's sequencer and reorder ring over caller storage cut in equal
+/// slots. Packets are stored decoded (header, payload, CRC), as the decoder
+/// left them.
+pub struct RxReorder<B> {
+    storage: B,
+    slot_len: usize,
+    slots: usize,
+    lens: [u16; MAX_WINDOW],
     expected: u16,
-    /// Packets dropped since the last nack for `expected`, or `None` when no nack is pending.
-    since_nack: Option<u16>,
-    /// Re-ask after this many further dropped packets (a lost retransmission).
-    renack_after: u16,
+    /// Slot of `expected + 1`.
+    head: usize,
+    /// Bit `i`: `expected + 1 + i` is held.
+    held: u64,
 }
 
-impl RxSequence {
-    pub fn new(renack_after: u16) -> Self {
-        RxSequence {
+impl<B: AsMut<[u8]> + AsRef<[u8]>> RxReorder<B> {
+    pub fn new(storage: B, slot_len: usize) -> Self {
+        let slots = storage
+            .as_ref()
+            .len()
+            .checked_div(slot_len)
+            .unwrap_or(0)
+            .min(MAX_WINDOW);
+        RxReorder {
+            storage,
+            slot_len,
+            slots,
+            lens: [0; MAX_WINDOW],
             expected: 0,
-            since_nack: None,
-            renack_after: renack_after.max(1),
+            head: 0,
+            held: 0,
         }
     }
 
@@ -167,121 +389,71 @@ impl RxSequence {
         self.expected
     }
 
-    /// Restarts at `expected` (a new session).
+    /// Packets after `expected` the ring can hold.
+    pub fn capacity(&self) -> usize {
+        self.slots
+    }
+
+    /// Largest decoded packet a slot holds.
+    pub fn slot_len(&self) -> usize {
+        self.slot_len
+    }
+
+    /// Bit `i`: `expected + 1 + i` is held (the SACK bitmap).
+    pub fn held(&self) -> u64 {
+        self.held
+    }
+
+    /// Restarts at `expected` with nothing held (a new session).
     pub fn reset(&mut self, expected: u16) {
         self.expected = expected;
-        self.since_nack = None;
+        self.head = 0;
+        self.held = 0;
     }
 
-    pub fn accept(&mut self, seq: u16) -> Accept {
+    /// Decides what to do with `packet` (its decoded bytes) numbered `seq`, and
+    /// keeps it when it arrived after a gap.
+    pub fn accept(&mut self, seq: u16, packet: &[u8]) -> Accept {
         let d = seq_diff(seq, self.expected);
         if d == 0 {
-            self.expected = self.expected.wrapping_add(1);
-            self.since_nack = None;
-            Accept::Deliver
-        } else if d < 0 {
-            Accept::Duplicate
-        } else {
-            Accept::Gap {
-                nack: self.should_nack(),
-            }
+            return Accept::Deliver;
         }
+        if d < 0 {
+            return Accept::Duplicate;
+        }
+        let bit = d as usize - 1;
+        if bit >= self.slots || packet.len() > self.slot_len {
+            return Accept::Beyond;
+        }
+        if self.held & (1 << bit) != 0 {
+            return Accept::Duplicate;
+        }
+        let i = (self.head + bit) % self.slots;
+        let start = i * self.slot_len;
+        self.storage.as_mut()[start..start + packet.len()].copy_from_slice(packet);
+        self.lens[i] = packet.len() as u16;
+        self.held |= 1 << bit;
+        Accept::Held
     }
 
-    /// A corrupted packet arrived: whether to nack now.
-    pub fn corrupted(&mut self) -> bool {
-        self.should_nack()
+    /// The expected packet was delivered: move on. Returns the slot range of the
+    /// next packet when the ring already holds it.
+    pub fn advance(&mut self) -> Option<core::ops::Range<usize>> {
+        self.expected = self.expected.wrapping_add(1);
+        let next = self.held & 1 != 0;
+        let i = self.head;
+        self.held >>= 1;
+        if self.slots > 0 {
+            self.head = (self.head + 1) % self.slots;
+        }
+        next.then(|| i * self.slot_len..i * self.slot_len + self.lens[i] as usize)
     }
 
-    fn should_nack(&mut self) -> bool {
-        match self.since_nack {
-            None => {
-                self.since_nack = Some(0);
-                true
-            }
-            Some(n) if n + 1 >= self.renack_after => {
-                self.since_nack = Some(0);
-                true
-            }
-            Some(n) => {
-                self.since_nack = Some(n + 1);
-                false
-            }
-        }
+    /// Decoded bytes of a held packet (a range from [`RxReorder::advance`]).
+    pub fn bytes(&self, range: core::ops::Range<usize>) -> &[u8] {
+        &self.storage.as_ref()[range]
     }
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn window_holds_acks_and_replays() {
-        let mut storage = [0u8; 4 * 8];
-        let mut w = TxWindow::new(&mut storage, 8);
-        w.reset(65534);
-        for (k, seq) in [65534u16, 65535, 0, 1].iter().enumerate() {
-            w.push(*seq, &[k as u8; 3]).unwrap();
-        }
-        assert!(w.is_full());
-        assert_eq!(w.push(2, &[9]), Err(WindowError::Full));
-        assert_eq!(w.ack(65533), 0, "stale ack");
-        assert_eq!(w.ack(5), 0, "ack beyond what was sent");
-        assert_eq!(w.ack(0), 2, "ack across the wrap");
-        let replay: heapless::Vec<u8, 8> = w.unacked_from(0).map(|p| p[0]).collect();
-        assert_eq!(&replay[..], &[2, 3]);
-        assert_eq!(w.unacked_from(1).count(), 1);
-        assert_eq!(w.push(3, &[1]), Err(WindowError::OutOfSequence));
-        w.push(2, &[4]).unwrap();
-        assert_eq!(w.ack(3), 3);
-        assert!(w.is_empty());
-    }
-
-    #[test]
-    fn any_slot_count_keeps_every_packet_across_the_wrap() {
-        // Five slots: with `seq % slots`, 65535 and 0 would share a slot.
-        for slots in [3usize, 5, 7] {
-            let mut storage = [0u8; 7 * 4];
-            let mut w = TxWindow::new(&mut storage[..slots * 4], 4);
-            w.reset(65530);
-            let mut next = 65530u16;
-            let mut acked = next;
-            for round in 0..20u8 {
-                while !w.is_full() {
-                    w.push(next, &[next as u8, round]).unwrap();
-                    next = next.wrapping_add(1);
-                }
-                // Everything held replays in order, each packet its own bytes.
-                let held: heapless::Vec<u8, 8> = w.unacked_from(acked).map(|p| p[0]).collect();
-                let want: heapless::Vec<u8, 8> = (0..slots as u16)
-                    .map(|k| acked.wrapping_add(k) as u8)
-                    .collect();
-                assert_eq!(held, want, "{slots} slots, round {round}");
-                // Acknowledge one or two, as a receiver would.
-                acked = acked.wrapping_add(1 + (round % 2) as u16);
-                w.ack(acked);
-            }
-        }
-    }
-
-    #[test]
-    fn sequencer_delivers_in_order_and_limits_nacks() {
-        let mut r = RxSequence::new(3);
-        assert_eq!(r.accept(0), Accept::Deliver);
-        assert_eq!(r.accept(0), Accept::Duplicate);
-        assert_eq!(r.accept(2), Accept::Gap { nack: true });
-        assert_eq!(r.accept(3), Accept::Gap { nack: false });
-        assert_eq!(r.accept(4), Accept::Gap { nack: false });
-        assert_eq!(
-            r.accept(5),
-            Accept::Gap { nack: true },
-            "re-ask after 3 more drops"
-        );
-        assert_eq!(r.accept(1), Accept::Deliver);
-        assert_eq!(
-            r.accept(3),
-            Accept::Gap { nack: true },
-            "a new gap nacks at once"
-        );
-    }
-}
+mod tests;

@@ -102,13 +102,21 @@ pub struct LinkOptions {
     /// Per-epoch processing of a firmware this link starts.
     #[arg(long, value_enum, default_value_t = FirmwareProcessor::Traverse)]
     pub fw_processor: FirmwareProcessor,
-    /// Frame payload bytes per chunk packet.
-    #[arg(long, default_value_t = 1024)]
+    /// Largest frame payload per chunk packet. The session keeps chunks small enough
+    /// for the firmware to hold one that arrives after a gap (its capabilities say
+    /// how large), and shrinks them on a line that damages packets.
+    #[arg(long, default_value_t = 256)]
     pub chunk: usize,
     /// Seconds without any answer, or with a write blocked (a firmware that takes no
     /// bytes), before the firmware is declared unresponsive and the run stops.
     #[arg(long, default_value_t = 5.0)]
     pub link_timeout: f64,
+    /// Seconds with epochs outstanding and none completed (a line too noisy to carry
+    /// them, with the firmware still answering) before the run stops with the link's
+    /// figures and the outputs so far. On a baud-limited link it is at least three
+    /// times an epoch's transfer time.
+    #[arg(long, default_value_t = 30.0)]
+    pub progress_timeout: f64,
 }
 
 impl Default for LinkOptions {
@@ -126,8 +134,9 @@ impl Default for LinkOptions {
             fault_seed: 1,
             fw_memory: 32 << 20,
             fw_processor: FirmwareProcessor::Traverse,
-            chunk: 1024,
+            chunk: 256,
             link_timeout: 5.0,
+            progress_timeout: 30.0,
         }
     }
 }
