@@ -524,6 +524,49 @@ impl Rig {
     }
 }
 
+/// The calibration's precision as its maker states it (standard deviations): the
+/// prior of the calibration test and of the rig estimation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CalibrationPrecision {
+    /// Principal point, pixels (each coordinate, each camera).
+    pub principal_point_px: f64,
+    /// Focal length, relative (0.001 is 0.1 %).
+    pub focal: f64,
+    /// Relative angles of the rig, radians.
+    pub angles_rad: f64,
+    /// Base vector components, metres.
+    pub base_m: f64,
+}
+
+impl CalibrationPrecision {
+    /// What a calibration that does not state its precision is taken to have: loose
+    /// enough that a pixel of principal-point error, a few tenths of a percent of focal
+    /// length and a few hundredths of a degree of relative rotation can be corrected.
+    pub const UNSTATED: CalibrationPrecision = CalibrationPrecision {
+        principal_point_px: 2.0,
+        focal: 0.01,
+        angles_rad: 1e-3,
+        base_m: 1e-3,
+    };
+
+    pub fn valid(&self) -> bool {
+        [
+            self.principal_point_px,
+            self.focal,
+            self.angles_rad,
+            self.base_m,
+        ]
+        .iter()
+        .all(|v| *v > 0.0 && v.is_finite())
+    }
+}
+
+impl Default for CalibrationPrecision {
+    fn default() -> Self {
+        Self::UNSTATED
+    }
+}
+
 /// `F = diag(1, -1, -1)` maps camera axes (x right, y up, z back) to KITTI's
 /// (x right, y down, z forward).
 fn flip() -> Matrix3<f64> {

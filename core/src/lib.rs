@@ -6,7 +6,9 @@
 //!
 //! Data flows one way through the modules, one per pipeline stage:
 //! [`image`] -> `sift` -> `matching` -> [`camera`] -> `adjust` -> `traverse`;
-//! `protocol` carries frames in and results out.
+//! `protocol` carries frames in and results out. It is a leaf on [`camera`] and
+//! [`image`] types with its own codes for modes, statuses and flags: the firmware
+//! maps them to the traverse's, so the wire format stays put when the pipeline moves.
 #![no_std]
 #![forbid(unsafe_op_in_unsafe_fn)]
 

@@ -10,8 +10,8 @@ use embedded_io::{Read, Write};
 use phototraverse_core::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget};
 use phototraverse_core::protocol::assembly::{AssemblyError, FrameAssembler};
 use phototraverse_core::protocol::messages::{
-    points_flags, stage, status, Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult,
-    ErrorCode, Message, Points, Stats,
+    points_flags, stage, Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult,
+    EpochStatus, ErrorCode, Message, Points, Stats,
 };
 use phototraverse_core::protocol::{MAX_PAYLOAD, PROTOCOL_VERSION};
 
@@ -500,7 +500,7 @@ impl<Pr: EpochProcessor> Epochs<'_, '_, Pr> {
         tx.error(port, code, epoch, seq, text)?;
         tx.send(
             port,
-            &Message::Result(EpochResult::empty(epoch, status::LOST)),
+            &Message::Result(EpochResult::empty(epoch, EpochStatus::Lost)),
         )
     }
 

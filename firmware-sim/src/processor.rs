@@ -5,7 +5,8 @@ use phototraverse_core::budget::{Arena, ComponentKind, MemoryBudget, OutOfMemory
 use phototraverse_core::features::FeatureSet;
 use phototraverse_core::image::ImageView;
 use phototraverse_core::protocol::messages::{
-    processor_kind, stage, status, Aux, Configure, EpochResult, Points,
+    self, processor_kind, stage, Aux, Configure, EpochResult, EpochStatus, Figures, Points,
+    SiftCounts,
 };
 use phototraverse_core::sift::{Sift, SiftConfig, SiftError};
 
@@ -160,7 +161,8 @@ impl ProcessorFactory for SiftFactory {
 impl EpochProcessor for SiftProcessor<'_> {
     fn process(&mut self, input: &EpochInput, clock: &dyn Clock) -> EpochOutput {
         let mut timings_us = [0u32; stage::COUNT];
-        let mut result = EpochResult::empty(input.epoch, status::FEATURES_ONLY);
+        let mut result = EpochResult::empty(input.epoch, EpochStatus::FeaturesOnly);
+        let mut sift = SiftCounts::default();
         let [fl, fr] = &mut self.features;
         for (k, (image, set, st)) in [
             (&input.left, fl, stage::SIFT_LEFT),
@@ -174,13 +176,14 @@ impl EpochProcessor for SiftProcessor<'_> {
                 Ok(stats) => {
                     result.counts.keypoints[k] = set.len() as u32;
                     result.counts.dropped += (stats.dropped + stats.pending_dropped) as u32;
-                    result.extra[2 * k] = stats.extrema as f64;
-                    result.extra[2 * k + 1] = stats.refined as f64;
+                    sift.extrema[k] = stats.extrema as u32;
+                    sift.refined[k] = stats.refined as u32;
                 }
-                Err(_) => result.status = status::FAILED,
+                Err(_) => result.status = EpochStatus::Failed,
             }
             timings_us[st] = clock.now_us().saturating_sub(t0) as u32;
         }
+        result.figures = Figures::Sift(sift);
         EpochOutput { result, timings_us }
     }
 }
@@ -219,7 +222,7 @@ impl ProcessorFactory for ImageStatsFactory {
 
 impl ImageStats<'_> {
     /// Mean, median and mean absolute gradient (|dx| + |dy|) of one image.
-    fn measure(&mut self, img: &ImageView) -> [f64; 3] {
+    fn measure(&mut self, img: &ImageView) -> (f64, u8, f64) {
         self.histogram.fill(0);
         let (w, h) = (img.width(), img.height());
         let (mut sum, mut grad) = (0u64, 0u64);
@@ -248,11 +251,12 @@ impl ImageStats<'_> {
         for (v, &k) in self.histogram.iter().enumerate() {
             acc += k as u64;
             if 2 * acc >= n {
-                median = v;
+                // The histogram has one bin per grey value.
+                median = v as u8;
                 break;
             }
         }
-        [sum as f64 / n as f64, median as f64, grad as f64 / n as f64]
+        (sum as f64 / n as f64, median, grad as f64 / n as f64)
     }
 }
 
@@ -266,9 +270,12 @@ impl EpochProcessor for ImageStats<'_> {
         let t2 = clock.now_us();
         timings_us[stage::SIFT_LEFT] = (t1 - t0) as u32;
         timings_us[stage::SIFT_RIGHT] = (t2 - t1) as u32;
-        let mut result = EpochResult::empty(input.epoch, status::STATS_ONLY);
-        result.extra = [l[0], l[2], r[0], r[2]];
-        result.sigma0 = (l[1] - r[1]).abs();
+        let mut result = EpochResult::empty(input.epoch, EpochStatus::StatsOnly);
+        result.figures = Figures::ImageStats(messages::ImageStats {
+            mean: [l.0, r.0],
+            gradient_energy: [l.2, r.2],
+            median: [l.1, r.1],
+        });
         EpochOutput { result, timings_us }
     }
 }

@@ -1,6 +1,8 @@
 //! The traverse behind the protocol loop: maps a `Configure` message to a
 //! [`TraverseConfig`], carves the traverse from the firmware's arena and answers
-//! every epoch with its orientation, precision, counts and stage timings.
+//! every epoch with its orientation, precision, counts, flags, adjustment figures
+//! and stage timings. The wire has its own modes, statuses and flag bits; this is
+//! where they meet the traverse's.
 //! On request it reports the tie points and image observations that became
 //! final (their epoch is the next to leave the window), see [`TraverseProcessor`].
 use crate::processor::{
@@ -10,11 +12,13 @@ use phototraverse_core::budget::{Arena, MemoryBudget};
 use phototraverse_core::camera::Pose;
 use phototraverse_core::matching::StereoGeometry;
 use phototraverse_core::protocol::messages::{
-    processor_kind, stage, status, Configure, EpochResult, PointObservation, PointRecord, Points,
-    RigEstimate, AUX_GNSS, AUX_ODOMETER,
+    processor_kind, stage, AdjustMode, Adjustment, Configure, Counts, EpochResult, EpochStatus,
+    Figures, PointObservation, PointRecord, Points, ResultFlags, RigEstimate, AUX_GNSS,
+    AUX_ODOMETER,
 };
 use phototraverse_core::traverse::{
-    flags, AuxObservations, EpochStatus, Traverse, TraverseConfig, TraverseError, WindowObservation,
+    self, flags, AuxObservations, Traverse, TraverseConfig, TraverseError, TraverseMode,
+    WindowObservation,
 };
 
 /// Builds the traverse for a configuration.
@@ -43,6 +47,89 @@ struct ReportCursor {
     next: usize,
     /// A flush was asked: every epoch in the window is final.
     flushing: bool,
+}
+
+/// The traverse's mode for the wire's.
+pub fn traverse_mode(mode: AdjustMode) -> TraverseMode {
+    match mode {
+        AdjustMode::Window => TraverseMode::Window,
+        AdjustMode::Seed2014 => TraverseMode::Seed2014,
+        AdjustMode::Seed2006 => TraverseMode::Seed2006,
+    }
+}
+
+/// Every traverse flag and the wire's bit for it.
+const FLAGS: [(u32, ResultFlags); 13] = [
+    (flags::FEW_TIE_POINTS, ResultFlags::FEW_TIE_POINTS),
+    (flags::LOST, ResultFlags::LOST),
+    (flags::NO_FEATURES, ResultFlags::NO_FEATURES),
+    (flags::NO_STEREO, ResultFlags::NO_STEREO),
+    (flags::REPEATED, ResultFlags::REPEATED),
+    (flags::CHI2, ResultFlags::CHI2),
+    (flags::SOLVE_FAILED, ResultFlags::SOLVE_FAILED),
+    (flags::BAD_IMAGE, ResultFlags::BAD_IMAGE),
+    (flags::CAPACITY, ResultFlags::CAPACITY),
+    (flags::NO_RESECTION, ResultFlags::NO_RESECTION),
+    (flags::RELOCALIZED, ResultFlags::RELOCALIZED),
+    (
+        flags::CALIBRATION_CORRECTED,
+        ResultFlags::CALIBRATION_CORRECTED,
+    ),
+    (
+        flags::ROTATION_FROM_MATCHES,
+        ResultFlags::ROTATION_FROM_MATCHES,
+    ),
+];
+
+/// The wire's flags for the traverse's.
+pub fn result_flags(traverse_flags: u32) -> ResultFlags {
+    FLAGS
+        .iter()
+        .filter(|(t, _)| traverse_flags & t != 0)
+        .fold(ResultFlags::NONE, |acc, (_, r)| acc | *r)
+}
+
+/// The Result of an epoch's traverse output (the rig block apart).
+pub fn epoch_result(epoch: u32, out: &traverse::EpochOutput) -> EpochResult {
+    let status = match out.status {
+        traverse::EpochStatus::Ok => EpochStatus::Ok,
+        traverse::EpochStatus::Flagged => EpochStatus::Flagged,
+        traverse::EpochStatus::Predicted => EpochStatus::Predicted,
+        traverse::EpochStatus::Rejected => EpochStatus::Failed,
+    };
+    // Only an adjusted epoch (Ok or Flagged) has figures of its own; the others'
+    // would be zeros that read like a perfect fit.
+    let adjusted = matches!(status, EpochStatus::Ok | EpochStatus::Flagged);
+    let figures = if adjusted {
+        Figures::Adjustment(Adjustment {
+            sigma0: out.sigma0,
+            rms_px: out.rms_px,
+            // The global test's statistic vTPv, which sigma0^2 is over the redundancy.
+            chi2: out.sigma0 * out.sigma0 * out.redundancy as f64,
+            redundancy: out.redundancy,
+        })
+    } else {
+        Figures::None
+    };
+    EpochResult {
+        epoch,
+        status,
+        pose: out.left.to_params(),
+        sigma: out.std.unwrap_or([0.0; 6]),
+        flags: result_flags(out.flags),
+        counts: Counts {
+            keypoints: out.keypoints,
+            stereo_matches: out.stereo_matches,
+            tie_points: out.tie_points,
+            window_points: out.points,
+            observations: out.observations,
+            new_points: out.new_points,
+            // The traverse says that something was dropped, not how much.
+            dropped: (out.flags & flags::CAPACITY != 0) as u32,
+        },
+        figures,
+        rig: None,
+    }
 }
 
 /// The traverse configuration a `Configure` message asks for.
@@ -103,7 +190,9 @@ pub fn traverse_config(c: &Configure) -> Result<TraverseConfig, BuildError> {
     if !t.check_calibration {
         cfg = cfg.with_calibration_check(None);
     }
-    let mut cfg = cfg.with_rig_estimation(t.estimate_rig).with_mode(t.mode);
+    let mut cfg = cfg
+        .with_rig_estimation(t.estimate_rig)
+        .with_mode(traverse_mode(t.mode));
     cfg.fit_capacities();
     Ok(cfg)
 }
@@ -192,28 +281,7 @@ impl EpochProcessor for TraverseProcessor<'_> {
             aux_of(input),
             &ClockRef(clock),
         );
-        let code = match out.status {
-            EpochStatus::Ok => status::OK,
-            EpochStatus::Flagged => status::FLAGGED,
-            EpochStatus::Predicted => status::PREDICTED,
-            EpochStatus::Rejected => status::FAILED,
-        };
-        let mut result = EpochResult::empty(input.epoch, code);
-        result.pose = out.left.to_params();
-        result.sigma = out.std.unwrap_or([0.0; 6]);
-        result.sigma0 = out.sigma0;
-        result.counts.keypoints = out.keypoints;
-        result.counts.stereo_matches = out.stereo_matches;
-        result.counts.temporal_matches = out.tie_points;
-        result.counts.tie_points = out.points;
-        result.counts.observations = out.observations;
-        result.counts.dropped = (out.flags & flags::CAPACITY != 0) as u32;
-        result.extra = [
-            out.flags as f64,
-            out.rms_px,
-            out.new_points as f64,
-            out.redundancy as f64,
-        ];
+        let mut result = epoch_result(input.epoch, &out);
         // The rig as the adjustment has it, when it can differ from the calibration:
         // estimated freely, or corrected by the calibration check.
         let cfg = self.traverse.config();
@@ -358,9 +426,10 @@ impl TraverseProcessor<'_> {
 mod tests {
     use super::*;
     use phototraverse_core::adjust::Robust;
+    use phototraverse_core::camera::CalibrationPrecision;
     use phototraverse_core::camera::{Interior, Rig};
     use phototraverse_core::protocol::messages::{
-        CalibrationPrecision, Pipeline, Repr, TraverseMode, TraverseSettings, CONFIG_VERSION,
+        ImageStats, Pipeline, Repr, SiftCounts, TraverseSettings, CONFIG_VERSION,
     };
 
     fn configure(traverse: TraverseSettings) -> Configure {
@@ -388,7 +457,7 @@ mod tests {
         assert_eq!(d.datum, Pose::from_degrees(90.0, 0.0, 0.0, [0.0; 3]));
         assert_eq!(d.sigma_px, 0.5);
         let t = TraverseSettings {
-            mode: TraverseMode::Seed2014,
+            mode: AdjustMode::Seed2014,
             estimate_rig: true,
             sigma_px: 0.3,
             datum: [1.5, 0.01, 0.02, 5.0, 6.0, 1.2],
@@ -427,7 +496,7 @@ mod tests {
         assert_eq!(c.sigma_px, 0.3);
         assert_eq!(c.datum.to_params(), t.datum);
         let s = traverse_config(&configure(TraverseSettings {
-            mode: TraverseMode::Seed2006,
+            mode: AdjustMode::Seed2006,
             ..t
         }))
         .unwrap();
@@ -443,14 +512,106 @@ mod tests {
     }
 
     #[test]
-    fn a_result_with_the_rig_fits_a_transmit_slot() {
-        let mut r = EpochResult::empty(u32::MAX, status::FLAGGED);
-        r.rig = Some(RigEstimate {
+    fn every_traverse_flag_has_its_own_wire_bit() {
+        let mut traverse_bits = 0;
+        let mut wire = ResultFlags::NONE;
+        for (t, r) in FLAGS {
+            assert_eq!(t.count_ones(), 1);
+            assert_eq!(r.bits().count_ones(), 1);
+            assert_eq!(traverse_bits & t, 0, "traverse flag {t:#x} twice");
+            assert!(!wire.contains(r), "wire flag {r:?} twice");
+            traverse_bits |= t;
+            wire |= r;
+            assert_eq!(result_flags(t), r);
+        }
+        assert_eq!(traverse_bits & flags::FLAGGING, flags::FLAGGING);
+        assert_eq!(result_flags(traverse_bits), wire);
+        assert_eq!(result_flags(0), ResultFlags::NONE);
+    }
+
+    #[test]
+    fn the_result_names_what_the_traverse_counted() {
+        let out = traverse::EpochOutput {
+            status: traverse::EpochStatus::Flagged,
+            flags: flags::FEW_TIE_POINTS | flags::CAPACITY,
+            std: Some([1e-4; 6]),
+            sigma0: 0.8,
+            redundancy: 500,
+            keypoints: [900, 880],
+            stereo_matches: 400,
+            tie_points: 30,
+            new_points: 12,
+            observations: 1000,
+            points: 250,
+            rms_px: 0.4,
+            ..Default::default()
+        };
+        let r = epoch_result(7, &out);
+        assert_eq!(r.status, EpochStatus::Flagged);
+        assert_eq!(r.flags, ResultFlags::FEW_TIE_POINTS | ResultFlags::CAPACITY);
+        assert_eq!(
+            r.counts,
+            Counts {
+                keypoints: [900, 880],
+                stereo_matches: 400,
+                tie_points: 30,
+                window_points: 250,
+                observations: 1000,
+                new_points: 12,
+                dropped: 1,
+            }
+        );
+        let a = r.adjustment().unwrap();
+        assert_eq!((a.sigma0, a.rms_px, a.redundancy), (0.8, 0.4, 500));
+        assert!((a.chi2 - 0.64 * 500.0).abs() < 1e-9);
+        for (status, wire) in [
+            (traverse::EpochStatus::Predicted, EpochStatus::Predicted),
+            (traverse::EpochStatus::Rejected, EpochStatus::Failed),
+        ] {
+            let r = epoch_result(7, &traverse::EpochOutput { status, ..out });
+            assert_eq!(r.status, wire);
+            assert_eq!(r.figures, Figures::None, "{status:?}: not adjusted");
+        }
+    }
+
+    #[test]
+    fn the_largest_result_fits_a_transmit_slot() {
+        let rig = Some(RigEstimate {
             params: [1.0; 6],
             std: [1.0; 6],
         });
+        let blocks = [
+            Figures::None,
+            Figures::Adjustment(Adjustment {
+                sigma0: 1.0,
+                rms_px: 1.0,
+                chi2: 1.0,
+                redundancy: u32::MAX,
+            }),
+            Figures::Sift(SiftCounts {
+                extrema: [u32::MAX; 2],
+                refined: [u32::MAX; 2],
+            }),
+            Figures::ImageStats(ImageStats {
+                mean: [255.0; 2],
+                gradient_energy: [510.0; 2],
+                median: [255; 2],
+            }),
+        ];
         let mut buf = [0u8; 1024];
-        let n = r.emit(&mut buf).unwrap();
-        assert!(n <= crate::link::TX_MAX_PAYLOAD, "{n} bytes");
+        let largest = blocks
+            .into_iter()
+            .map(|figures| {
+                let r = EpochResult {
+                    flags: ResultFlags(u32::MAX),
+                    figures,
+                    rig,
+                    ..EpochResult::empty(u32::MAX, EpochStatus::Flagged)
+                };
+                r.emit(&mut buf).unwrap()
+            })
+            .max()
+            .unwrap();
+        assert!(largest <= crate::link::TX_MAX_PAYLOAD, "{largest} bytes");
     }
 }

@@ -1,13 +1,14 @@
 //! Pipeline settings a user gives in a TOML file (`--config FILE`) and the
 //! `Configure` message they become.
 use anyhow::{Context, Result};
-use phototraverse_core::camera::{Pose, Rig};
+use phototraverse_core::camera::{CalibrationPrecision, Pose, Rig};
 use phototraverse_core::protocol::messages::{
-    CalibrationPrecision, Configure, Pipeline, TraverseMode, TraverseSettings, CONFIG_VERSION,
+    AdjustMode, Configure, Pipeline, TraverseSettings, CONFIG_VERSION,
 };
 use phototraverse_core::traverse::config::{
     TRAVERSE_CONTRAST, TRAVERSE_FIXED_EPOCHS, TRAVERSE_OCTAVES, TRAVERSE_WINDOW,
 };
+use phototraverse_core::traverse::TraverseMode;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -35,6 +36,15 @@ impl Mode {
 
     pub fn name(self) -> &'static str {
         self.core().name()
+    }
+
+    /// The mode as the Configure message names it.
+    pub fn wire(self) -> AdjustMode {
+        match self {
+            Mode::Window => AdjustMode::Window,
+            Mode::Seed2014 => AdjustMode::Seed2014,
+            Mode::Seed2006 => AdjustMode::Seed2006,
+        }
     }
 }
 
@@ -217,7 +227,7 @@ impl PipelineSettings {
         Configure {
             version: CONFIG_VERSION,
             traverse: TraverseSettings {
-                mode: self.mode.core(),
+                mode: self.mode.wire(),
                 estimate_rig: self.estimate_rig,
                 sigma_px: self.sigma_px,
                 datum: datum.to_params(),
@@ -296,7 +306,7 @@ mod tests {
         let c = s.configure_for(&rig, &dataset, &CalibrationPrecision::UNSTATED);
         assert_eq!(c.version, CONFIG_VERSION);
         assert_eq!(c.pipeline.fixed_epochs, Some(TRAVERSE_FIXED_EPOCHS as u16));
-        assert_eq!(c.traverse.mode, TraverseMode::Seed2006);
+        assert_eq!(c.traverse.mode, AdjustMode::Seed2006);
         assert!(c.traverse.estimate_rig);
         assert_eq!(c.traverse.sigma_px, 0.8);
         assert!(c.pipeline.fine_octave);
@@ -309,7 +319,7 @@ mod tests {
             &CalibrationPrecision::UNSTATED,
         );
         assert_eq!(d.traverse.datum, dataset.to_params());
-        assert_eq!(d.traverse.mode, TraverseMode::Window);
+        assert_eq!(d.traverse.mode, AdjustMode::Window);
         assert!(!d.pipeline.fine_octave);
     }
 }

@@ -22,8 +22,9 @@ use anyhow::{Context, Result};
 use phototraverse_core::adjust::quality::ChiSquareTest;
 use phototraverse_core::budget::{ComponentKind, MemoryBudget};
 use phototraverse_core::camera::{kitti_from_pose, pose_from_kitti, Pose, Rig};
-use phototraverse_core::protocol::messages::{stage, status, ConfigAccepted, EpochResult};
-use phototraverse_core::traverse::flags;
+use phototraverse_core::protocol::messages::{
+    self, stage, ConfigAccepted, EpochResult, ResultFlags,
+};
 use phototraverse_core::traverse::motion::constant_velocity;
 use phototraverse_firmware_sim::{configuration_budget, TraverseFactory};
 use std::io::Write;
@@ -197,9 +198,8 @@ impl<'d> Run<'d> {
                 let e = i as u32;
                 // Statistics follow the result of every epoch the firmware processed.
                 session.wait_for("the epoch's result", |s| {
-                    s.result(e).is_some_and(|r| {
-                        s.stats(e).is_some() || matches!(r.status, status::LOST | status::FAILED)
-                    })
+                    s.result(e)
+                        .is_some_and(|r| s.stats(e).is_some() || no_pose_came_back(r))
                 })?;
                 let result = *session.result(e).context("result vanished")?;
                 self.note_rig_and_test(&result);
@@ -279,15 +279,14 @@ impl<'d> Run<'d> {
         timings: Option<[u32; 8]>,
     ) -> EpochRecord {
         let status = match r.status {
-            status::OK => EpochStatus::Ok,
-            status::FLAGGED => EpochStatus::Flagged,
-            status::PREDICTED => EpochStatus::Predicted,
-            status::LOST => EpochStatus::Lost,
+            messages::EpochStatus::Ok => EpochStatus::Ok,
+            messages::EpochStatus::Flagged => EpochStatus::Flagged,
+            messages::EpochStatus::Predicted => EpochStatus::Predicted,
+            messages::EpochStatus::Lost => EpochStatus::Lost,
             _ => EpochStatus::Predicted,
         };
-        let fl = r.extra[0] as u32;
-        if matches!(r.status, status::LOST | status::FAILED) {
-            // No pose came back: the host predicts it.
+        if no_pose_came_back(r) {
+            // The host predicts it.
             let mut rec = self.predicted(i, time, "frames lost on the link".into());
             rec.status = status;
             return rec;
@@ -310,14 +309,14 @@ impl<'d> Run<'d> {
             epoch: i,
             time: Some(time),
             status,
-            note: flag_note(fl),
+            note: flag_note(r.flags),
             left: CameraEop::from_pose(&left, sigma),
             right: CameraEop::from_pose(&right, None),
-            sigma0: (r.sigma0 > 0.0).then_some(r.sigma0),
+            sigma0: r.adjustment().map(|a| a.sigma0).filter(|s| *s > 0.0),
             chi2_passed: test.map(|t| t.passed),
             chi2: test.map(EpochChi2::from),
             observations: r.counts.observations as usize,
-            tie_points: r.counts.temporal_matches as usize,
+            tie_points: r.counts.tie_points as usize,
             keypoints: r.counts.keypoints,
             stereo_matches: r.counts.stereo_matches,
             stage_ms,
@@ -462,35 +461,45 @@ fn median(v: &mut [f64]) -> f64 {
     v[v.len() / 2]
 }
 
-/// The global test of an adjusted epoch's window, from its sigma0 and redundancy (the
-/// traverse processor's fourth processor-defined value).
-fn epoch_test(r: &EpochResult) -> Option<ChiSquareTest> {
-    let dof = r.extra[3];
-    (matches!(r.status, status::OK | status::FLAGGED) && r.sigma0 > 0.0 && dof >= 1.0).then(|| {
-        let dof = dof as usize;
-        ChiSquareTest::new(r.sigma0 * r.sigma0 * dof as f64, dof)
-    })
+/// Whether the firmware sent no pose for the epoch (frames lost or refused).
+fn no_pose_came_back(r: &EpochResult) -> bool {
+    matches!(
+        r.status,
+        messages::EpochStatus::Lost | messages::EpochStatus::Failed
+    )
 }
 
-/// The flags of an epoch in words.
-fn flag_note(f: u32) -> Option<String> {
+/// The two-sided global test of an adjusted epoch's window.
+fn epoch_test(r: &EpochResult) -> Option<ChiSquareTest> {
+    let oriented = matches!(
+        r.status,
+        messages::EpochStatus::Ok | messages::EpochStatus::Flagged
+    );
+    r.adjustment()
+        .filter(|a| oriented && a.sigma0 > 0.0 && a.redundancy >= 1)
+        .map(|a| ChiSquareTest::new(a.chi2, a.redundancy as usize))
+}
+
+/// The flags of an epoch in words. The informational NO_RESECTION has no word: the
+/// notes never carried it, and the reports stay comparable with earlier runs.
+fn flag_note(f: ResultFlags) -> Option<String> {
     let names = [
-        (flags::FEW_TIE_POINTS, "few tie points"),
-        (flags::LOST, "continuity lost"),
-        (flags::NO_FEATURES, "no features"),
-        (flags::NO_STEREO, "no stereo matches"),
-        (flags::REPEATED, "repeated frame"),
-        (flags::CHI2, "chi-square test failed"),
-        (flags::SOLVE_FAILED, "adjustment failed"),
-        (flags::BAD_IMAGE, "image refused"),
-        (flags::CAPACITY, "capacity reached"),
-        (flags::RELOCALIZED, "relocalized"),
-        (flags::ROTATION_FROM_MATCHES, "rotation from matches"),
-        (flags::CALIBRATION_CORRECTED, "calibration corrected"),
+        (ResultFlags::FEW_TIE_POINTS, "few tie points"),
+        (ResultFlags::LOST, "continuity lost"),
+        (ResultFlags::NO_FEATURES, "no features"),
+        (ResultFlags::NO_STEREO, "no stereo matches"),
+        (ResultFlags::REPEATED, "repeated frame"),
+        (ResultFlags::CHI2, "chi-square test failed"),
+        (ResultFlags::SOLVE_FAILED, "adjustment failed"),
+        (ResultFlags::BAD_IMAGE, "image refused"),
+        (ResultFlags::CAPACITY, "capacity reached"),
+        (ResultFlags::RELOCALIZED, "relocalized"),
+        (ResultFlags::ROTATION_FROM_MATCHES, "rotation from matches"),
+        (ResultFlags::CALIBRATION_CORRECTED, "calibration corrected"),
     ];
     let words: Vec<&str> = names
         .iter()
-        .filter(|(b, _)| f & b != 0)
+        .filter(|(b, _)| f.contains(*b))
         .map(|(_, n)| *n)
         .collect();
     (!words.is_empty()).then(|| words.join(", "))

@@ -6,7 +6,7 @@
 use crate::link::{FaultCounters, LinkOptions, Transport};
 use phototraverse_core::protocol::crc::crc32;
 use phototraverse_core::protocol::messages::{
-    status, Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult, ErrorCode,
+    Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult, EpochStatus, ErrorCode,
     FrameBegin, FrameChunk, FrameEnd, Hello, Message, MessageType, PixelFormat, Points,
     PointsRequest, Reset, Stats, CHUNK_HEADER_LEN,
 };
@@ -212,15 +212,50 @@ pub struct SessionReport {
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct EpochResultRecord {
     pub epoch: u32,
+    /// The wire's status code (`docs/protocol.md`, Result).
     pub status: u8,
     pub pose: [f64; 6],
     pub sigma: [f64; 6],
-    pub sigma0: f64,
+    /// The wire's flag bits.
+    pub flags: u32,
     pub keypoints: [u32; 2],
     pub stereo_matches: u32,
     pub tie_points: u32,
-    pub extra: [f64; 4],
+    pub window_points: u32,
+    pub observations: u32,
+    pub new_points: u32,
+    pub dropped: u32,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub adjustment: Option<AdjustmentRecord>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sift: Option<SiftRecord>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub image_stats: Option<ImageStatsRecord>,
     pub latency_s: f64,
+}
+
+/// The adjustment figures of a result.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct AdjustmentRecord {
+    pub sigma0: f64,
+    pub rms_px: f64,
+    pub chi2: f64,
+    pub redundancy: u32,
+}
+
+/// The feature extractor's figures of a result (left, right).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct SiftRecord {
+    pub extrema: [u32; 2],
+    pub refined: [u32; 2],
+}
+
+/// The image statistics of a result (left, right).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ImageStatsRecord {
+    pub mean: [f64; 2],
+    pub gradient_energy: [f64; 2],
+    pub median: [u8; 2],
 }
 
 #[derive(Debug, Clone, serde::Serialize)]
@@ -511,7 +546,7 @@ impl<T: Transport> Session<T> {
         let pending: Vec<u32> = self.sent_epochs.iter().map(|e| e.0).collect();
         self.wait_for("the results of the epochs sent", |s| {
             pending.iter().all(|e| match s.results.get(e) {
-                Some(r) => r.status == status::LOST || s.stats.contains_key(e),
+                Some(r) => r.status == EpochStatus::Lost || s.stats.contains_key(e),
                 None => false,
             })
         })
@@ -607,16 +642,35 @@ impl<T: Transport> Session<T> {
                     (Some(a), Some(b)) => b.saturating_duration_since(*a).as_secs_f64(),
                     _ => 0.0,
                 };
+                let c = &r.counts;
                 EpochResultRecord {
                     epoch: r.epoch,
-                    status: r.status,
+                    status: r.status.code(),
                     pose: r.pose,
                     sigma: r.sigma,
-                    sigma0: r.sigma0,
-                    keypoints: r.counts.keypoints,
-                    stereo_matches: r.counts.stereo_matches,
-                    tie_points: r.counts.tie_points,
-                    extra: r.extra,
+                    flags: r.flags.bits(),
+                    keypoints: c.keypoints,
+                    stereo_matches: c.stereo_matches,
+                    tie_points: c.tie_points,
+                    window_points: c.window_points,
+                    observations: c.observations,
+                    new_points: c.new_points,
+                    dropped: c.dropped,
+                    adjustment: r.adjustment().map(|a| AdjustmentRecord {
+                        sigma0: a.sigma0,
+                        rms_px: a.rms_px,
+                        chi2: a.chi2,
+                        redundancy: a.redundancy,
+                    }),
+                    sift: r.sift().map(|s| SiftRecord {
+                        extrema: s.extrema,
+                        refined: s.refined,
+                    }),
+                    image_stats: r.image_stats().map(|s| ImageStatsRecord {
+                        mean: s.mean,
+                        gradient_energy: s.gradient_energy,
+                        median: s.median,
+                    }),
                     latency_s,
                 }
             })
@@ -647,7 +701,7 @@ impl<T: Transport> Session<T> {
     pub fn lost_epochs(&self) -> Vec<u32> {
         self.results
             .values()
-            .filter(|r| r.status == status::LOST)
+            .filter(|r| r.status == EpochStatus::Lost)
             .map(|r| r.epoch)
             .collect()
     }

@@ -3,7 +3,7 @@
 use phototraverse_core::camera::{Interior, Rig};
 use phototraverse_core::protocol::crc::crc32;
 use phototraverse_core::protocol::messages::{
-    status, Camera, Configure, ErrorCode, FrameBegin, FrameChunk, FrameEnd, Message, Pipeline,
+    Camera, Configure, EpochStatus, ErrorCode, FrameBegin, FrameChunk, FrameEnd, Message, Pipeline,
     PixelFormat, CONFIG_VERSION,
 };
 use phototraverse_core::protocol::{encode_packet, Header, MAX_PACKET};
@@ -53,8 +53,9 @@ fn image(epoch: u32, camera: u32, w: u16, h: u16) -> Vec<u8> {
     v
 }
 
-/// Keypoints the core's SIFT finds in an image under `config`, extracted here.
-fn local_keypoints(img: &[u8], w: u16, h: u16, config: &Configure) -> u32 {
+/// Keypoints, extrema and refined locations the core's SIFT finds in an image under
+/// `config`, extracted here.
+fn local_sift(img: &[u8], w: u16, h: u16, config: &Configure) -> [u32; 3] {
     use phototraverse_core::budget::{Arena, MemoryBudget};
     use phototraverse_core::features::FeatureSet;
     use phototraverse_core::image::ImageView;
@@ -67,16 +68,17 @@ fn local_keypoints(img: &[u8], w: u16, h: u16, config: &Configure) -> u32 {
     let mut arena = Arena::new(&mut storage);
     let mut sift = Sift::new(cfg, &mut arena).unwrap();
     let mut set = FeatureSet::new(&mut arena, cfg.max_keypoints).unwrap();
-    sift.extract(
-        &ImageView::new(img, w as usize, h as usize).unwrap(),
-        &mut set,
-    )
-    .unwrap();
-    set.len() as u32
+    let stats = sift
+        .extract(
+            &ImageView::new(img, w as usize, h as usize).unwrap(),
+            &mut set,
+        )
+        .unwrap();
+    [set.len(), stats.extrema, stats.refined].map(|n| n as u32)
 }
 
-/// Mean and mean absolute gradient computed here independently of the firmware.
-fn expected_stats(img: &[u8], w: usize, h: usize) -> [f64; 2] {
+/// Mean, mean absolute gradient and median computed here independently of the firmware.
+fn expected_stats(img: &[u8], w: usize, h: usize) -> (f64, f64, u8) {
     let mean = img.iter().map(|&v| v as f64).sum::<f64>() / (w * h) as f64;
     let mut g = 0u64;
     for r in 0..h {
@@ -90,7 +92,11 @@ fn expected_stats(img: &[u8], w: usize, h: usize) -> [f64; 2] {
             }
         }
     }
-    [mean, g as f64 / (w * h) as f64]
+    let mut sorted = img.to_vec();
+    sorted.sort_unstable();
+    // The lower median: the first value that half the pixels do not exceed.
+    let median = sorted[(w * h - 1) / 2];
+    (mean, g as f64 / (w * h) as f64, median)
 }
 
 fn config(w: u16, h: u16) -> Configure {
@@ -140,27 +146,30 @@ fn check_results<T: Transport>(s: &Session<T>, epochs: std::ops::Range<u32>, w: 
             .result(e)
             .unwrap_or_else(|| panic!("no result for epoch {e}"));
         let (li, ri) = (image(e, 0, w, h), image(e, 1, w, h));
-        if r.status == status::FEATURES_ONLY {
+        if r.status == EpochStatus::FeaturesOnly {
             let cfg = config(w, h);
-            let want = [
-                local_keypoints(&li, w, h, &cfg),
-                local_keypoints(&ri, w, h, &cfg),
-            ];
+            let [l, rr] = [local_sift(&li, w, h, &cfg), local_sift(&ri, w, h, &cfg)];
+            let want = [l[0], rr[0]];
             assert_eq!(r.counts.keypoints, want, "epoch {e}");
             assert!(
                 want[0] > 10 && want[1] > 10,
                 "the test images need features: {want:?}"
             );
+            let sift = r.sift().expect("the feature processor's figures");
+            assert_eq!(sift.extrema, [l[1], rr[1]], "epoch {e}");
+            assert_eq!(sift.refined, [l[2], rr[2]], "epoch {e}");
         } else {
-            assert_eq!(r.status, status::STATS_ONLY, "epoch {e}");
-            let l = expected_stats(&li, w as usize, h as usize);
-            let rr = expected_stats(&ri, w as usize, h as usize);
-            let want = [l[0], l[1], rr[0], rr[1]];
-            for (k, (got, want)) in r.extra.iter().zip(want).enumerate() {
+            assert_eq!(r.status, EpochStatus::StatsOnly, "epoch {e}");
+            let got = r.image_stats().expect("the statistics processor's figures");
+            for (k, img) in [&li, &ri].into_iter().enumerate() {
+                let (mean, gradient, median) = expected_stats(img, w as usize, h as usize);
+                let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
+                assert!(close(got.mean[k], mean), "epoch {e} camera {k}: {got:?}");
                 assert!(
-                    (got - want).abs() < 1e-9,
-                    "epoch {e} value {k}: {got} vs {want}"
+                    close(got.gradient_energy[k], gradient),
+                    "epoch {e} camera {k}: {got:?}"
                 );
+                assert_eq!(got.median[k], median, "epoch {e} camera {k}");
             }
         }
         let st = s.stats(e).expect("stats follow each result");
@@ -183,7 +192,7 @@ fn full_session<T: Transport>(t: T, opts: SessionOptions, epochs: u32) -> Sessio
 fn sift_session<T: Transport>(t: T, epochs: u32) {
     let s = full_session(t, SessionOptions::default(), epochs);
     for e in 0..epochs {
-        assert_eq!(s.result(e).unwrap().status, status::FEATURES_ONLY);
+        assert_eq!(s.result(e).unwrap().status, EpochStatus::FeaturesOnly);
     }
 }
 
@@ -202,7 +211,7 @@ fn inproc_session_returns_a_result_per_epoch() {
     let s = full_session(inproc_stats(), SessionOptions::default(), 4);
     assert!(s.errors().is_empty(), "{:?}", s.errors());
     let s = full_session(inproc(), SessionOptions::default(), 6);
-    assert_eq!(s.result(5).unwrap().status, status::FEATURES_ONLY);
+    assert_eq!(s.result(5).unwrap().status, EpochStatus::FeaturesOnly);
     let link = s.link_stats();
     assert_eq!(link.frame_bytes, 6 * 2 * W as u64 * H as u64);
     assert_eq!(
@@ -476,8 +485,8 @@ fn bad_input_is_refused_clearly_and_the_session_goes_on() {
     send_epochs(&mut s, 0..3, W, H);
     s.finish().unwrap();
     check_results(&s, 0..3, W, H);
-    assert_eq!(s.result(100).unwrap().status, status::LOST);
-    assert_eq!(s.result(101).unwrap().status, status::LOST);
+    assert_eq!(s.result(100).unwrap().status, EpochStatus::Lost);
+    assert_eq!(s.result(101).unwrap().status, EpochStatus::Lost);
     assert_eq!(s.lost_epochs(), vec![100, 101, 102]);
 }
 
@@ -498,7 +507,7 @@ fn a_frame_of_another_size_than_the_cameras_is_refused_naming_the_field() {
         "{text}"
     );
     s.finish().unwrap();
-    assert_eq!(s.result(0).unwrap().status, status::LOST);
+    assert_eq!(s.result(0).unwrap().status, EpochStatus::Lost);
     // One error for the epoch, not one per camera or chunk.
     let n = s.errors().iter().filter(|e| e.code == "FrameSize").count();
     assert_eq!(n, 1, "{:?}", s.errors());

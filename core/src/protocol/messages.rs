@@ -3,8 +3,8 @@
 //! All integers and floats are little-endian. Layouts are tabulated in
 //! `docs/protocol.md`; each struct below lists its fields in wire order.
 use super::packet::EncodeError;
-use crate::camera::{Interior, Rig};
-pub use crate::traverse::{CalibrationPrecision, TraverseMode};
+use crate::camera::{CalibrationPrecision, Interior, Rig};
+use core::ops::{BitOr, BitOrAssign};
 
 /// Message type byte of the header.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -307,7 +307,7 @@ repr!(
 /// fields; a parser reads the fields it knows and ignores the rest.
 pub const CONFIG_VERSION: u16 = 4;
 
-/// Pipeline capacities and thresholds, plain numbers the traverse maps to its config.
+/// Pipeline capacities and thresholds, plain numbers the firmware maps to its config.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Pipeline {
     pub max_width: u16,
@@ -356,11 +356,51 @@ impl Default for Pipeline {
     }
 }
 
-/// How the traverse adjusts (Configure v2; a v1 payload gets [`TraverseSettings::default`]).
+/// How the firmware adjusts, as the Configure v2 mode byte names it. The wire's own
+/// codes: the firmware maps them to its pipeline's modes, so the format does not
+/// move when the pipeline does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum AdjustMode {
+    /// The sliding window (the project's default).
+    #[default]
+    Window,
+    /// Seed 000 (Lemes Neto 2014): two-epoch sequences, one re-weighting.
+    Seed2014,
+    /// Seed 002 (Barbosa 2006): seven bases adjusted together.
+    Seed2006,
+}
+
+impl AdjustMode {
+    pub const ALL: [AdjustMode; 3] = [
+        AdjustMode::Window,
+        AdjustMode::Seed2014,
+        AdjustMode::Seed2006,
+    ];
+
+    /// Wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            AdjustMode::Window => 0,
+            AdjustMode::Seed2014 => 1,
+            AdjustMode::Seed2006 => 2,
+        }
+    }
+
+    /// The mode of a wire code; a code this build does not know is refused, since
+    /// adjusting in another mode than the host asked for would be silently wrong.
+    pub fn parse(code: u8) -> Result<Self, ParseError> {
+        Self::ALL
+            .into_iter()
+            .find(|m| m.code() == code)
+            .ok_or(ParseError::Invalid("adjustment mode"))
+    }
+}
+
+/// How the firmware adjusts (Configure v2; a v1 payload gets [`TraverseSettings::default`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TraverseSettings {
     /// Window (the project's default) or one of the seed procedures.
-    pub mode: TraverseMode,
+    pub mode: AdjustMode,
     /// Estimate the relative orientation of the rig in the adjustment.
     pub estimate_rig: bool,
     /// A-priori standard deviation of an image measurement, pixels.
@@ -380,7 +420,7 @@ impl Default for TraverseSettings {
     /// looking along +Y at the origin (omega 90 degrees).
     fn default() -> Self {
         TraverseSettings {
-            mode: TraverseMode::Window,
+            mode: AdjustMode::Window,
             estimate_rig: false,
             sigma_px: 0.5,
             datum: [core::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0, 0.0, 0.0],
@@ -460,17 +500,16 @@ repr!(
             fine_octave: false,
             fixed_epochs: None,
         };
-        let mut traverse = TraverseSettings::default();
+        let mut settings = TraverseSettings::default();
         let mut pipeline = pipeline;
         let mut flags = 0;
         if version >= 2 {
             let code = r.u8()?;
             flags = r.u8()?;
-            traverse.sigma_px = r.f64()?;
-            traverse.datum = r.f64s()?;
-            traverse.mode =
-                TraverseMode::from_code(code).ok_or(ParseError::Invalid("traverse mode"))?;
-            traverse.estimate_rig = flags & CONFIG_ESTIMATE_RIG != 0;
+            settings.sigma_px = r.f64()?;
+            settings.datum = r.f64s()?;
+            settings.mode = AdjustMode::parse(code)?;
+            settings.estimate_rig = flags & CONFIG_ESTIMATE_RIG != 0;
             pipeline.fine_octave = flags & CONFIG_FINE_OCTAVE != 0;
         }
         if version >= 3 {
@@ -478,8 +517,8 @@ repr!(
             pipeline.fixed_epochs = (f != FIRMWARE_DEFAULT_U16).then_some(f);
         }
         if version >= 4 {
-            traverse.check_calibration = flags & CONFIG_HOLD_CALIBRATION == 0;
-            let p = &mut traverse.calibration_precision;
+            settings.check_calibration = flags & CONFIG_HOLD_CALIBRATION == 0;
+            let p = &mut settings.calibration_precision;
             p.principal_point_px = r.f64()?;
             p.focal = r.f64()?;
             p.angles_rad = r.f64()?;
@@ -494,7 +533,7 @@ repr!(
             version,
             rig,
             pipeline,
-            traverse,
+            traverse: settings,
         })
     },
     |s, w| {
@@ -778,52 +817,260 @@ repr!(
 );
 
 /// Status of an epoch's result.
-pub mod status {
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EpochStatus {
     /// Oriented.
-    pub const OK: u8 = 0;
-    /// Features extracted, no orientation (the traverse is not running).
-    pub const FEATURES_ONLY: u8 = 1;
+    Ok,
+    /// Features extracted, no orientation (the firmware runs the feature processor).
+    FeaturesOnly,
     /// Image statistics only (bring-up processor).
-    pub const STATS_ONLY: u8 = 2;
+    StatsOnly,
     /// The epoch's frames could not be assembled (lost chunk, CRC): the epoch is lost.
-    pub const LOST: u8 = 3;
-    /// The processor failed on this epoch (see the Error message).
-    pub const FAILED: u8 = 4;
-    /// Oriented, but flagged (few tie points, chi-square test, lost continuity).
-    pub const FLAGGED: u8 = 5;
+    Lost,
+    /// The processor failed on this epoch (see the Error message), or refused its frames.
+    Failed,
+    /// Oriented, but flagged (see the [`ResultFlags`]).
+    Flagged,
     /// Not oriented from the images: the pose is the motion prediction.
-    pub const PREDICTED: u8 = 6;
+    Predicted,
+    /// A code this build does not know (a newer firmware's); never one of the codes
+    /// above, which parse to their own variants. Kept rather than refused so a host
+    /// can still report the epoch.
+    Unknown(u8),
 }
 
-/// Counts of an epoch.
+impl EpochStatus {
+    const KNOWN: [EpochStatus; 7] = [
+        EpochStatus::Ok,
+        EpochStatus::FeaturesOnly,
+        EpochStatus::StatsOnly,
+        EpochStatus::Lost,
+        EpochStatus::Failed,
+        EpochStatus::Flagged,
+        EpochStatus::Predicted,
+    ];
+
+    /// Wire code.
+    pub const fn code(self) -> u8 {
+        match self {
+            EpochStatus::Ok => 0,
+            EpochStatus::FeaturesOnly => 1,
+            EpochStatus::StatsOnly => 2,
+            EpochStatus::Lost => 3,
+            EpochStatus::Failed => 4,
+            EpochStatus::Flagged => 5,
+            EpochStatus::Predicted => 6,
+            EpochStatus::Unknown(code) => code,
+        }
+    }
+
+    pub fn from_code(code: u8) -> Self {
+        Self::KNOWN
+            .into_iter()
+            .find(|s| s.code() == code)
+            .unwrap_or(EpochStatus::Unknown(code))
+    }
+}
+
+/// What went wrong or was noteworthy at an epoch, one bit each. Bits this build
+/// does not name (a newer firmware's) are kept as they came.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ResultFlags(pub u32);
+
+impl ResultFlags {
+    pub const NONE: ResultFlags = ResultFlags(0);
+    /// Too few tie points to the previous epoch: the epoch leans on its prediction.
+    pub const FEW_TIE_POINTS: ResultFlags = ResultFlags(1 << 0);
+    /// Continuity was lost (a frame from another place, a large jump): too few
+    /// descriptor matches and too few tie points carried the epoch.
+    pub const LOST: ResultFlags = ResultFlags(1 << 1);
+    /// An image has no usable keypoints (textureless, dark, saturated).
+    pub const NO_FEATURES: ResultFlags = ResultFlags(1 << 2);
+    /// No stereo match at this epoch.
+    pub const NO_STEREO: ResultFlags = ResultFlags(1 << 3);
+    /// The frames repeat the previous epoch's: the previous pose is repeated.
+    pub const REPEATED: ResultFlags = ResultFlags(1 << 4);
+    /// The global chi-square test of the adjustment failed (upper tail).
+    pub const CHI2: ResultFlags = ResultFlags(1 << 5);
+    /// The adjustment failed (singular, no redundancy).
+    pub const SOLVE_FAILED: ResultFlags = ResultFlags(1 << 6);
+    /// The frames were refused (size, capacity): the epoch was skipped.
+    pub const BAD_IMAGE: ResultFlags = ResultFlags(1 << 7);
+    /// A capacity was reached (points or observations dropped).
+    pub const CAPACITY: ResultFlags = ResultFlags(1 << 8);
+    /// Informational: the resection failed and the motion prediction started the adjustment.
+    pub const NO_RESECTION: ResultFlags = ResultFlags(1 << 9);
+    /// Informational: the camera was found again by a resection on the previous stereo
+    /// pair's points matched without the motion prior.
+    pub const RELOCALIZED: ResultFlags = ResultFlags(1 << 10);
+    /// Informational: the calibration check found the calibration significantly wrong
+    /// and corrected it (the rig's relative orientation and the interior orientation).
+    pub const CALIBRATION_CORRECTED: ResultFlags = ResultFlags(1 << 11);
+    /// Informational: no resection posed the camera; its rotation came from the
+    /// temporal matches, its position from the prediction.
+    pub const ROTATION_FROM_MATCHES: ResultFlags = ResultFlags(1 << 12);
+
+    pub const fn bits(self) -> u32 {
+        self.0
+    }
+
+    /// Whether every bit of `other` is set.
+    pub const fn contains(self, other: ResultFlags) -> bool {
+        self.0 & other.0 == other.0
+    }
+
+    pub const fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+}
+
+impl BitOr for ResultFlags {
+    type Output = ResultFlags;
+    fn bitor(self, rhs: ResultFlags) -> ResultFlags {
+        ResultFlags(self.0 | rhs.0)
+    }
+}
+
+impl BitOrAssign for ResultFlags {
+    fn bitor_assign(&mut self, rhs: ResultFlags) {
+        self.0 |= rhs.0;
+    }
+}
+
+/// Counts of an epoch; a processor that does not produce an item sends 0.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Counts {
+    /// Keypoints of the left and right image.
     pub keypoints: [u32; 2],
+    /// Left-right matches of the epoch.
     pub stereo_matches: u32,
-    pub temporal_matches: u32,
+    /// Tie points linking this epoch to the previous one (seen in both stereo pairs).
     pub tie_points: u32,
+    /// Tie points in the adjustment window after this epoch.
+    pub window_points: u32,
+    /// Image observations in the adjustment window after this epoch.
     pub observations: u32,
+    /// Tie points this epoch added to the window.
+    pub new_points: u32,
     /// Items dropped because a capacity was full.
     pub dropped: u32,
+}
+
+/// The adjustment of the window that ended with an epoch.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Adjustment {
+    /// A-posteriori sigma0 (a-priori 1).
+    pub sigma0: f64,
+    /// RMS image residual of the window, pixels.
+    pub rms_px: f64,
+    /// Statistic of the global test, `vTPv` with the a-priori variance factor 1;
+    /// chi-square with `redundancy` degrees of freedom.
+    pub chi2: f64,
+    /// Redundancy of the adjustment: the degrees of freedom of `chi2`.
+    pub redundancy: u32,
+}
+
+/// What the feature extractor found in each image (left, right).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SiftCounts {
+    /// 3x3x3 scale-space extrema above the preliminary contrast threshold.
+    pub extrema: [u32; 2],
+    /// Refined keypoint locations accepted (contrast and edge tests passed).
+    pub refined: [u32; 2],
+}
+
+/// Statistics of each image (left, right), for checking that the frames arrived whole.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ImageStats {
+    /// Mean grey value.
+    pub mean: [f64; 2],
+    /// Mean absolute gradient, `|dx| + |dy|` per pixel.
+    pub gradient_energy: [f64; 2],
+    /// Median grey value.
+    pub median: [u8; 2],
+}
+
+/// The figures only one kind of processor produces. A processor answers an epoch
+/// alone, so a Result carries one block at most; and the blocks together would
+/// not fit the firmware's 256-byte transmit slot with the rig block.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Figures {
+    #[default]
+    None,
+    Adjustment(Adjustment),
+    Sift(SiftCounts),
+    ImageStats(ImageStats),
+}
+
+/// Wire codes of the [`Figures`] kinds.
+mod figures_kind {
+    pub const NONE: u8 = 0;
+    pub const ADJUSTMENT: u8 = 1;
+    pub const SIFT: u8 = 2;
+    pub const IMAGE_STATS: u8 = 3;
+}
+
+impl Figures {
+    fn parse(r: &mut Reader) -> Result<Self, ParseError> {
+        Ok(match r.u8()? {
+            figures_kind::NONE => Figures::None,
+            figures_kind::ADJUSTMENT => Figures::Adjustment(Adjustment {
+                sigma0: r.f64()?,
+                rms_px: r.f64()?,
+                chi2: r.f64()?,
+                redundancy: r.u32()?,
+            }),
+            figures_kind::SIFT => Figures::Sift(SiftCounts {
+                extrema: r.u32s()?,
+                refined: r.u32s()?,
+            }),
+            figures_kind::IMAGE_STATS => Figures::ImageStats(ImageStats {
+                mean: r.f64s()?,
+                gradient_energy: r.f64s()?,
+                median: [r.u8()?, r.u8()?],
+            }),
+            _ => return Err(ParseError::Invalid("result figures kind")),
+        })
+    }
+
+    fn emit(&self, w: &mut Writer) -> Result<(), EncodeError> {
+        match self {
+            Figures::None => w.u8(figures_kind::NONE),
+            Figures::Adjustment(a) => {
+                w.u8(figures_kind::ADJUSTMENT)?;
+                w.f64s(&[a.sigma0, a.rms_px, a.chi2])?;
+                w.u32(a.redundancy)
+            }
+            Figures::Sift(s) => {
+                w.u8(figures_kind::SIFT)?;
+                w.u32s(&s.extrema)?;
+                w.u32s(&s.refined)
+            }
+            Figures::ImageStats(s) => {
+                w.u8(figures_kind::IMAGE_STATS)?;
+                w.f64s(&s.mean)?;
+                w.f64s(&s.gradient_energy)?;
+                w.bytes(&s.median)
+            }
+        }
+    }
 }
 
 /// Firmware -> host: result of one epoch.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EpochResult {
     pub epoch: u32,
-    /// [`status`].
-    pub status: u8,
+    pub status: EpochStatus,
     /// Left camera: omega, phi, kappa (rad), X, Y, Z (m).
     pub pose: [f64; 6],
     /// Standard deviations of `pose`.
     pub sigma: [f64; 6],
-    pub sigma0: f64,
+    pub flags: ResultFlags,
     pub counts: Counts,
-    /// Processor-defined summary values (for the statistics processor: mean and
-    /// gradient energy of each image).
-    pub extra: [f64; 4],
+    /// The processor's own figures.
+    pub figures: Figures,
     /// Optional trailing block: the rig as estimated by the adjustment (sent only
-    /// when the configuration estimates it; older parsers ignore it).
+    /// when it can differ from the calibration).
     pub rig: Option<RigEstimate>,
 }
 
@@ -859,16 +1106,37 @@ impl RigEstimate {
 }
 
 impl EpochResult {
-    pub fn empty(epoch: u32, status: u8) -> Self {
+    pub fn empty(epoch: u32, status: EpochStatus) -> Self {
         EpochResult {
             epoch,
             status,
             pose: [0.0; 6],
             sigma: [0.0; 6],
-            sigma0: 0.0,
+            flags: ResultFlags::NONE,
             counts: Counts::default(),
-            extra: [0.0; 4],
+            figures: Figures::None,
             rig: None,
+        }
+    }
+
+    pub fn adjustment(&self) -> Option<&Adjustment> {
+        match &self.figures {
+            Figures::Adjustment(a) => Some(a),
+            _ => None,
+        }
+    }
+
+    pub fn sift(&self) -> Option<&SiftCounts> {
+        match &self.figures {
+            Figures::Sift(s) => Some(s),
+            _ => None,
+        }
+    }
+
+    pub fn image_stats(&self) -> Option<&ImageStats> {
+        match &self.figures {
+            Figures::ImageStats(s) => Some(s),
+            _ => None,
         }
     }
 }
@@ -879,19 +1147,20 @@ repr!(
     |r| {
         Ok(EpochResult {
             epoch: r.u32()?,
-            status: r.u8()?,
+            status: EpochStatus::from_code(r.u8()?),
             pose: r.f64s()?,
             sigma: r.f64s()?,
-            sigma0: r.f64()?,
+            flags: ResultFlags(r.u32()?),
             counts: Counts {
                 keypoints: r.u32s()?,
                 stereo_matches: r.u32()?,
-                temporal_matches: r.u32()?,
                 tie_points: r.u32()?,
+                window_points: r.u32()?,
                 observations: r.u32()?,
+                new_points: r.u32()?,
                 dropped: r.u32()?,
             },
-            extra: r.f64s()?,
+            figures: Figures::parse(&mut r)?,
             rig: if r.remaining() > 0 {
                 Some(RigEstimate::parse(&mut r)?)
             } else {
@@ -901,20 +1170,21 @@ repr!(
     },
     |s, w| {
         w.u32(s.epoch)?;
-        w.u8(s.status)?;
+        w.u8(s.status.code())?;
         w.f64s(&s.pose)?;
         w.f64s(&s.sigma)?;
-        w.f64(s.sigma0)?;
+        w.u32(s.flags.bits())?;
         let c = &s.counts;
         w.u32s(&c.keypoints)?;
         w.u32s(&[
             c.stereo_matches,
-            c.temporal_matches,
             c.tie_points,
+            c.window_points,
             c.observations,
+            c.new_points,
             c.dropped,
         ])?;
-        w.f64s(&s.extra)?;
+        s.figures.emit(&mut w)?;
         if let Some(rig) = &s.rig {
             rig.emit(&mut w)?;
         }

@@ -6,7 +6,7 @@ use super::assembly::{AssemblyError, FrameAssembler};
 use super::crc::crc32;
 use super::messages::*;
 use super::*;
-use crate::camera::{Interior, Rig};
+use crate::camera::{CalibrationPrecision, Interior, Rig};
 
 fn sample_messages(chunk: &[u8]) -> [Message<'_>; 16] {
     let rig = Rig::rectified(Interior::pinhole_px(640, 480, 700.0), 0.54);
@@ -34,7 +34,7 @@ fn sample_messages(chunk: &[u8]) -> [Message<'_>; 16] {
             rig,
             pipeline: Pipeline::default(),
             traverse: TraverseSettings {
-                mode: TraverseMode::Seed2006,
+                mode: AdjustMode::Seed2006,
                 estimate_rig: true,
                 sigma_px: 0.7,
                 datum: [1.5, 0.01, -0.02, 10.0, 20.0, 2.2],
@@ -74,23 +74,7 @@ fn sample_messages(chunk: &[u8]) -> [Message<'_>; 16] {
             gnss_m: [1.0, 2.0, 3.0],
             gnss_sigma_m: [0.1, 0.2, 0.3],
         }),
-        Message::Result(EpochResult {
-            epoch: 7,
-            status: status::OK,
-            pose: [1.5, 0.1, -0.2, 3.0, 40.0, 1.6],
-            sigma: [1e-4; 6],
-            sigma0: 0.9,
-            counts: Counts {
-                keypoints: [900, 880],
-                stereo_matches: 400,
-                temporal_matches: 300,
-                tie_points: 250,
-                observations: 1000,
-                dropped: 3,
-            },
-            extra: [1.0, 2.0, 3.0, 4.0],
-            rig: None,
-        }),
+        Message::Result(sample_result()),
         Message::Stats(Stats {
             epoch: 7,
             timings_us: [1, 2, 3, 4, 5, 6, 7, 28],
@@ -127,6 +111,33 @@ fn sample_messages(chunk: &[u8]) -> [Message<'_>; 16] {
         Message::Points(sample_points()),
         Message::PointsRequest(PointsRequest { flush: 1 }),
     ]
+}
+
+/// A Result with every field set but the rig block (a cut at its start parses).
+fn sample_result() -> EpochResult {
+    EpochResult {
+        epoch: 7,
+        status: EpochStatus::Flagged,
+        pose: [1.5, 0.1, -0.2, 3.0, 40.0, 1.6],
+        sigma: [1e-4, 2e-4, 3e-4, 0.01, 0.02, 0.03],
+        flags: ResultFlags::FEW_TIE_POINTS | ResultFlags::CHI2 | ResultFlags::ROTATION_FROM_MATCHES,
+        counts: Counts {
+            keypoints: [900, 880],
+            stereo_matches: 400,
+            tie_points: 300,
+            window_points: 250,
+            observations: 1000,
+            new_points: 40,
+            dropped: 3,
+        },
+        figures: Figures::Adjustment(Adjustment {
+            sigma0: 0.9,
+            rms_px: 0.35,
+            chi2: 0.81 * 1234.0,
+            redundancy: 1234,
+        }),
+        rig: None,
+    }
 }
 
 /// A Points message with two points and three observations.
@@ -268,7 +279,7 @@ fn configure_ignores_fields_of_later_versions() {
         rig,
         pipeline: Pipeline::default(),
         traverse: TraverseSettings {
-            mode: TraverseMode::Seed2014,
+            mode: AdjustMode::Seed2014,
             ..TraverseSettings::default()
         },
     };
@@ -289,7 +300,7 @@ fn configure_v2_round_trips_and_v1_payloads_get_the_v1_behaviour() {
             ..Pipeline::default()
         },
         traverse: TraverseSettings {
-            mode: TraverseMode::Seed2014,
+            mode: AdjustMode::Seed2014,
             estimate_rig: true,
             sigma_px: 0.25,
             datum: [1.6, -0.02, 0.03, 100.0, -50.0, 1.5],
@@ -301,7 +312,7 @@ fn configure_v2_round_trips_and_v1_payloads_get_the_v1_behaviour() {
     assert_eq!(n, 301);
     assert_eq!(Configure::parse(&payload[..n]).unwrap(), v2);
     // Every mode code survives; an unknown one is refused by name.
-    for mode in [TraverseMode::Window, TraverseMode::Seed2006] {
+    for mode in [AdjustMode::Window, AdjustMode::Seed2006] {
         let c = Configure {
             traverse: TraverseSettings {
                 mode,
@@ -324,7 +335,7 @@ fn configure_v2_round_trips_and_v1_payloads_get_the_v1_behaviour() {
     payload[243] = 9;
     assert_eq!(
         Configure::parse(&payload[..n]),
-        Err(ParseError::Invalid("traverse mode"))
+        Err(ParseError::Invalid("adjustment mode"))
     );
     // A version-1 writer stops after the pipeline (243 bytes); the reader fills
     // the version-1 behaviour in: window mode, fixed rig, 0.5 px, omega 90 deg.
@@ -394,33 +405,132 @@ fn configure_v2_round_trips_and_v1_payloads_get_the_v1_behaviour() {
         Err(ParseError::Invalid("calibration precision"))
     );
     assert_eq!(back.traverse, TraverseSettings::default());
-    assert_eq!(back.traverse.mode, TraverseMode::Window);
+    assert_eq!(back.traverse.mode, AdjustMode::Window);
     assert!(!back.traverse.estimate_rig);
     assert!((back.traverse.datum[0] - core::f64::consts::FRAC_PI_2).abs() < 1e-15);
 }
 
 #[test]
 fn result_rig_block_is_optional_and_complete_when_present() {
-    let mut r = EpochResult::empty(3, status::OK);
-    r.sigma0 = 1.1;
+    let mut r = EpochResult::empty(3, EpochStatus::Ok);
     let mut payload = [0u8; 512];
     let n = r.emit(&mut payload).unwrap();
-    assert_eq!(n, 169);
+    assert_eq!(n, 138);
+    assert_eq!(EpochResult::parse(&payload[..n]).unwrap(), r);
+    r.figures = sample_result().figures;
+    let n = r.emit(&mut payload).unwrap();
+    assert_eq!(n, 166);
     assert_eq!(EpochResult::parse(&payload[..n]).unwrap(), r);
     r.rig = Some(RigEstimate {
         params: [0.001, -0.002, 0.003, 0.4, 0.001, -0.002],
         std: [1e-4, 2e-4, 3e-4, 1e-3, 2e-3, 3e-3],
     });
     let n = r.emit(&mut payload).unwrap();
-    assert_eq!(n, 217);
+    assert_eq!(n, 214);
     assert_eq!(EpochResult::parse(&payload[..n]).unwrap(), r);
-    for cut in 170..n {
+    for cut in 167..n {
         assert_eq!(
             EpochResult::parse(&payload[..cut]),
             Err(ParseError::Truncated),
             "cut at {cut}"
         );
     }
+}
+
+#[test]
+fn every_result_block_round_trips_and_the_largest_fits_a_transmit_slot() {
+    let rig = Some(RigEstimate {
+        params: [0.001, -0.002, 0.003, 0.4, 0.001, -0.002],
+        std: [1e-4, 2e-4, 3e-4, 1e-3, 2e-3, 3e-3],
+    });
+    let blocks = [
+        (Figures::None, 138),
+        (sample_result().figures, 166),
+        (
+            Figures::Sift(SiftCounts {
+                extrema: [5000, 4800],
+                refined: [1200, 1100],
+            }),
+            154,
+        ),
+        (
+            Figures::ImageStats(ImageStats {
+                mean: [101.25, 99.5],
+                gradient_energy: [12.125, 11.0625],
+                median: [97, 255],
+            }),
+            172,
+        ),
+    ];
+    let mut payload = [0u8; 512];
+    let mut largest = 0;
+    for (figures, len) in blocks {
+        for rig in [None, rig] {
+            let r = EpochResult {
+                figures,
+                rig,
+                ..sample_result()
+            };
+            let n = r.emit(&mut payload).unwrap();
+            assert_eq!(n, len + if rig.is_some() { 48 } else { 0 }, "{figures:?}");
+            assert_eq!(EpochResult::parse(&payload[..n]).unwrap(), r);
+            largest = largest.max(n);
+        }
+    }
+    // The firmware's transmit slot holds 256 bytes of payload.
+    assert_eq!(largest, 220);
+    assert!(largest <= 256);
+    // Blocks the wire does not define are refused by name: their length is unknown.
+    let n = sample_result().emit(&mut payload).unwrap();
+    payload[137] = 9;
+    assert_eq!(
+        EpochResult::parse(&payload[..n]),
+        Err(ParseError::Invalid("result figures kind"))
+    );
+}
+
+#[test]
+fn result_status_codes_are_stable_and_unknown_ones_are_kept() {
+    let known = [
+        (EpochStatus::Ok, 0),
+        (EpochStatus::FeaturesOnly, 1),
+        (EpochStatus::StatsOnly, 2),
+        (EpochStatus::Lost, 3),
+        (EpochStatus::Failed, 4),
+        (EpochStatus::Flagged, 5),
+        (EpochStatus::Predicted, 6),
+    ];
+    for (s, code) in known {
+        assert_eq!(s.code(), code);
+        assert_eq!(EpochStatus::from_code(code), s);
+    }
+    for code in 7..=u8::MAX {
+        assert_eq!(EpochStatus::from_code(code), EpochStatus::Unknown(code));
+    }
+    // A newer firmware's status and flag bits reach the host as they were sent.
+    let mut payload = [0u8; 512];
+    let r = EpochResult {
+        status: EpochStatus::Unknown(42),
+        flags: ResultFlags(1 << 31) | ResultFlags::LOST,
+        ..sample_result()
+    };
+    let n = r.emit(&mut payload).unwrap();
+    assert_eq!(payload[4], 42);
+    let back = EpochResult::parse(&payload[..n]).unwrap();
+    assert_eq!(back.status, EpochStatus::Unknown(42));
+    assert!(back.flags.contains(ResultFlags::LOST) && back.flags.bits() & (1 << 31) != 0);
+}
+
+#[test]
+fn adjust_mode_codes_round_trip_and_unknown_ones_are_refused() {
+    for (k, m) in AdjustMode::ALL.into_iter().enumerate() {
+        assert_eq!(m.code() as usize, k);
+        assert_eq!(AdjustMode::parse(m.code()), Ok(m));
+    }
+    assert_eq!(
+        AdjustMode::parse(3),
+        Err(ParseError::Invalid("adjustment mode"))
+    );
 }
 
 #[test]

@@ -3,6 +3,8 @@ use crate::adjust::{
     AdjustConfig, ConstraintSigmas, Correspondence, InteriorSigmas, ResectionConfig, Robust,
 };
 use crate::budget::{slice_bytes, ComponentKind, MemoryBudget};
+/// Lives with the rig it qualifies, so the wire format can carry it without the traverse.
+pub use crate::camera::CalibrationPrecision;
 use crate::camera::{Pose, Rig};
 use crate::features::FeatureSet;
 use crate::matching::{MatchConfig, RefineConfig, StereoGeometry};
@@ -131,49 +133,6 @@ impl Default for CalibrationCheck {
             min_effect_px: CALIBRATION_MIN_EFFECT_PX,
             persistence: CALIBRATION_PERSISTENCE,
         }
-    }
-}
-
-/// The calibration's precision as its maker states it (standard deviations): the
-/// prior of the calibration test and of the rig estimation.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct CalibrationPrecision {
-    /// Principal point, pixels (each coordinate, each camera).
-    pub principal_point_px: f64,
-    /// Focal length, relative (0.001 is 0.1 %).
-    pub focal: f64,
-    /// Relative angles of the rig, radians.
-    pub angles_rad: f64,
-    /// Base vector components, metres.
-    pub base_m: f64,
-}
-
-impl CalibrationPrecision {
-    /// What a calibration that does not state its precision is taken to have: loose
-    /// enough that a pixel of principal-point error, a few tenths of a percent of focal
-    /// length and a few hundredths of a degree of relative rotation can be corrected.
-    pub const UNSTATED: CalibrationPrecision = CalibrationPrecision {
-        principal_point_px: 2.0,
-        focal: 0.01,
-        angles_rad: 1e-3,
-        base_m: 1e-3,
-    };
-
-    pub fn valid(&self) -> bool {
-        [
-            self.principal_point_px,
-            self.focal,
-            self.angles_rad,
-            self.base_m,
-        ]
-        .iter()
-        .all(|v| *v > 0.0 && v.is_finite())
-    }
-}
-
-impl Default for CalibrationPrecision {
-    fn default() -> Self {
-        Self::UNSTATED
     }
 }
 
@@ -453,24 +412,6 @@ pub enum TraverseMode {
 }
 
 impl TraverseMode {
-    /// Wire code (protocol `Configure` v2).
-    pub const fn code(self) -> u8 {
-        match self {
-            TraverseMode::Window => 0,
-            TraverseMode::Seed2014 => 1,
-            TraverseMode::Seed2006 => 2,
-        }
-    }
-
-    pub const fn from_code(code: u8) -> Option<Self> {
-        match code {
-            0 => Some(TraverseMode::Window),
-            1 => Some(TraverseMode::Seed2014),
-            2 => Some(TraverseMode::Seed2006),
-            _ => None,
-        }
-    }
-
     /// Lower-case name used on the command line and in reports.
     pub const fn name(self) -> &'static str {
         match self {
@@ -709,16 +650,14 @@ mod mode_tests {
     }
 
     #[test]
-    fn mode_codes_and_names_round_trip() {
+    fn mode_names_round_trip() {
         for m in [
             TraverseMode::Window,
             TraverseMode::Seed2014,
             TraverseMode::Seed2006,
         ] {
-            assert_eq!(TraverseMode::from_code(m.code()), Some(m));
             assert_eq!(TraverseMode::from_name(m.name()), Some(m));
         }
-        assert_eq!(TraverseMode::from_code(3), None);
         assert_eq!(TraverseMode::from_name("seed"), None);
     }
 }
