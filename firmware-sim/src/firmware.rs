@@ -11,7 +11,7 @@ use phototraverse_core::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget
 use phototraverse_core::protocol::assembly::{AssemblyError, FrameAssembler};
 use phototraverse_core::protocol::messages::{
     points_flags, stage, Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult,
-    EpochStatus, ErrorCode, Message, Points, Stats,
+    EpochStatus, ErrorCode, Message, Points, SettingError, Stats,
 };
 use phototraverse_core::protocol::{MAX_PAYLOAD, PROTOCOL_VERSION};
 
@@ -253,7 +253,8 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
             frame_bytes: 2 * frame as u32,
             capacity_bytes: capacity as u32,
         };
-        link.tx(&*clock).send(port, &Message::ConfigAccepted(accepted))?;
+        link.tx(&*clock)
+            .send(port, &Message::ConfigAccepted(accepted))?;
         let mut epochs = Epochs {
             frames: [
                 FrameAssembler::new(left, p.max_width, p.max_height),
@@ -283,24 +284,52 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
         })
     }
 
-    fn check_limits(&self, config: &Configure) -> Result<(), &'static str> {
+    /// The settings' own limits (the same the host checks), then this firmware's.
+    fn check_limits(&self, config: &Configure) -> Result<(), Refusal> {
+        config.validate().map_err(Refusal::Setting)?;
         let p = &config.pipeline;
-        if p.max_width == 0 || p.max_height == 0 {
-            return Err("pipeline max_width and max_height must be positive");
+        let l = &self.limits;
+        if p.max_width > l.max_width || p.max_height > l.max_height {
+            return Err(Refusal::FrameSize(
+                [p.max_width, p.max_height],
+                [l.max_width, l.max_height],
+            ));
         }
-        if p.max_width > self.limits.max_width || p.max_height > self.limits.max_height {
-            return Err("pipeline frame size exceeds the firmware's limits");
-        }
-        if !(1..=2).contains(&p.pixel_bytes) {
-            return Err("pixel_bytes must be 1 or 2");
-        }
-        if p.keypoints_per_image > self.limits.max_keypoints {
-            return Err("keypoints_per_image exceeds the firmware's limit");
+        if p.keypoints_per_image > l.max_keypoints {
+            return Err(Refusal::Keypoints(p.keypoints_per_image, l.max_keypoints));
         }
         if config.rig.validate().is_err() {
-            return Err("the rig does not validate (interior orientation or base)");
+            return Err(Refusal::Rig);
         }
         Ok(())
+    }
+}
+
+/// Why a configuration is refused before anything is carved.
+enum Refusal {
+    Setting(SettingError),
+    FrameSize([u16; 2], [u16; 2]),
+    Keypoints(u32, u32),
+    Rig,
+}
+
+impl core::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut core::fmt::Formatter) -> core::fmt::Result {
+        match self {
+            Refusal::Setting(e) => write!(f, "{e}"),
+            Refusal::FrameSize([w, h], [mw, mh]) => write!(
+                f,
+                "max_width, max_height {w}x{h} exceed this firmware's largest frame {mw}x{mh}"
+            ),
+            Refusal::Keypoints(n, max) => write!(
+                f,
+                "keypoints_per_image {n} exceeds this firmware's limit of {max}"
+            ),
+            Refusal::Rig => write!(
+                f,
+                "rig: the interior orientation or the base does not validate"
+            ),
+        }
     }
 }
 

@@ -24,7 +24,7 @@ pub const RX_HELD_PAYLOAD: usize = 256 + phototraverse_core::protocol::messages:
 /// Bytes of one reorder slot (a decoded packet).
 pub const RX_SLOT: usize = HEADER_LEN + RX_HELD_PAYLOAD + CRC_LEN;
 /// Packets held after a gap.
-pub const RX_SLOTS: usize = 63;
+pub const RX_SLOTS: usize = 32;
 /// Sequenced packets the host may send beyond the last acknowledgement: the
 /// one expected and those the reorder ring holds.
 pub const RX_WINDOW: u16 = RX_SLOTS as u16 + 1;

@@ -16,6 +16,7 @@ use phototraverse_core::protocol::messages::{
     Figures, PointObservation, PointRecord, Points, ResultFlags, RigEstimate, AUX_GNSS,
     AUX_ODOMETER,
 };
+use phototraverse_core::sift::SiftError;
 use phototraverse_core::traverse::{
     self, flags, AuxObservations, Traverse, TraverseConfig, TraverseError, TraverseMode,
     WindowObservation,
@@ -145,22 +146,18 @@ pub fn traverse_config(c: &Configure) -> Result<TraverseConfig, BuildError> {
     if rig.base_length() <= 0.0 {
         return Err(BuildError::Invalid("rig: zero base"));
     }
+    // The settings' ranges were checked by `Configure::validate`; what follows are
+    // the rig's, which the settings do not carry.
     let p = &c.pipeline;
     let t = &c.traverse;
-    if !t.datum.iter().all(|v| v.is_finite()) {
-        return Err(BuildError::Invalid("datum: value not finite"));
-    }
-    if !(t.sigma_px > 0.0 && t.sigma_px.is_finite()) {
-        return Err(BuildError::Invalid("image sigma must be positive"));
-    }
     let datum = Pose::from_params(&t.datum);
     let mut cfg = TraverseConfig::for_rig(rig, datum);
     cfg.sigma_px = t.sigma_px;
-    let n = p.keypoints_per_image.clamp(1, 100_000) as usize;
+    let n = p.keypoints_per_image as usize;
     cfg.sift.max_keypoints = n;
     cfg.matching.max_keypoints = n;
-    cfg.sift.octaves = p.octaves.max(1) as usize;
-    cfg.sift.levels = p.scales_per_octave.max(1) as usize;
+    cfg.sift.octaves = p.octaves as usize;
+    cfg.sift.levels = p.scales_per_octave as usize;
     cfg.sift.contrast_threshold = p.contrast_threshold;
     cfg.sift.fine_octave = p.fine_octave;
     cfg.sift.edge_threshold = p.edge_ratio;
@@ -171,21 +168,16 @@ pub fn traverse_config(c: &Configure) -> Result<TraverseConfig, BuildError> {
     {
         *max_disparity_px = p.max_disparity_px;
     }
-    let window = (p.window_len as usize).max(2);
+    let window = p.window_len as usize;
     cfg.adjust.window = window;
     cfg.matching.track_history = window;
-    cfg.matching.max_tracks = (p.track_capacity as usize).max(1);
+    cfg.matching.max_tracks = p.track_capacity as usize;
     if let Some(f) = p.fixed_epochs {
         cfg.adjust.fixed_epochs = f as usize;
     }
     // The mode's own settings (seed window lengths included) come last, then the
     // capacities that follow from the window.
     // A seed mode's window length wins over the rig estimation's minimum.
-    if !t.calibration_precision.valid() {
-        return Err(BuildError::Invalid(
-            "calibration precision must be positive",
-        ));
-    }
     let mut cfg = cfg.with_calibration_precision(t.calibration_precision);
     if !t.check_calibration {
         cfg = cfg.with_calibration_check(None);
@@ -201,6 +193,7 @@ fn build_error(e: TraverseError) -> BuildError {
     match e {
         TraverseError::OutOfMemory(m) => BuildError::OutOfMemory(m),
         TraverseError::Config(what) => BuildError::Invalid(what),
+        TraverseError::Sift(SiftError::BadConfig(field)) => BuildError::Invalid(field),
         TraverseError::Sift(_) => BuildError::Invalid("feature extractor configuration"),
         TraverseError::Match(_) => BuildError::Invalid("matcher configuration"),
         TraverseError::Adjust(_) => BuildError::Invalid("adjustment configuration"),
@@ -214,7 +207,7 @@ impl ProcessorFactory for TraverseFactory {
     fn budget(&self, config: &Configure, budget: &mut MemoryBudget) -> Result<(), BuildError> {
         traverse_config(config)?
             .budget(budget)
-            .map_err(|_| BuildError::Invalid("feature extractor configuration"))
+            .map_err(|e| build_error(TraverseError::Sift(e)))
     }
 
     fn build<'a>(

@@ -1,7 +1,7 @@
 //! Pipeline settings a user gives in a TOML file (`--config FILE`) and the
 //! `Configure` message they become.
 use anyhow::{Context, Result};
-use phototraverse_core::camera::{CalibrationPrecision, Pose, Rig};
+use phototraverse_core::camera::{CalibrationPrecision, Interior, Pose, Rig};
 use phototraverse_core::protocol::messages::{
     AdjustMode, Configure, Pipeline, TraverseSettings, CONFIG_VERSION,
 };
@@ -154,47 +154,15 @@ impl PipelineSettings {
         path.map_or_else(|| Ok(Self::default()), Self::from_file)
     }
 
+    /// Checks every setting with the limits the firmware applies (one place for
+    /// both, [`Configure::validate`]), before anything is sent.
     pub fn validate(&self) -> Result<()> {
-        anyhow::ensure!(
-            self.keypoints_per_image >= 8,
-            "keypoints_per_image must be at least 8"
-        );
-        anyhow::ensure!((1..=8).contains(&self.octaves), "octaves must be 1..=8");
-        anyhow::ensure!(
-            (1..=6).contains(&self.scales_per_octave),
-            "scales_per_octave must be 1..=6"
-        );
-        anyhow::ensure!(
-            self.match_ratio > 0.0 && self.match_ratio <= 1.0,
-            "match_ratio must be in (0, 1]"
-        );
-        anyhow::ensure!(self.window >= 2, "window must be at least 2 epochs");
-        anyhow::ensure!(self.fixed_epochs <= 64, "fixed_epochs must be at most 64");
-        anyhow::ensure!(
-            self.track_capacity >= 8,
-            "track_capacity must be at least 8"
-        );
-        anyhow::ensure!(
-            self.sigma_px > 0.0 && self.sigma_px.is_finite(),
-            "sigma_px must be positive"
-        );
-        anyhow::ensure!(
-            self.contrast_threshold >= 0.0 && self.contrast_threshold.is_finite(),
-            "contrast_threshold must be finite and at least 0"
-        );
-        if let Some(d) = self.max_disparity_px {
-            // A range below one pixel searches nothing: every epoch would be flagged.
-            anyhow::ensure!(
-                d >= 1.0 && d.is_finite(),
-                "max_disparity_px must be at least 1 pixel (the stereo search range), got {d}"
-            );
-        }
-        if let Some(d) = &self.datum {
-            anyhow::ensure!(
-                d.pose().to_params().iter().all(|v| v.is_finite()),
-                "datum: values must be finite"
-            );
-        }
+        // The rig does not matter for the settings' ranges; the maximal disparity,
+        // when not set, follows the image width.
+        let rig = Rig::rectified(Interior::pinhole_px(640, 480, 700.0), 0.5);
+        self.configure(&rig)
+            .validate()
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
         Ok(())
     }
 

@@ -1,4 +1,6 @@
-//! Shared helpers of the end-to-end tests (fixture paths).
+//! Shared helpers of the end-to-end tests (fixture paths) and the protocol fuzz harness.
+pub mod fuzz;
+
 use std::path::PathBuf;
 
 /// `tests/fixtures/NAME` inside the repository.

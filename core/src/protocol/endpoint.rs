@@ -507,7 +507,8 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
             let seq = packet.seq();
             match MessageType::from_u8(packet.type_byte()) {
                 Some(MessageType::Ack) => {
-                    if let Ok(Message::Ack(a)) = Message::parse(packet.type_byte(), packet.payload())
+                    if let Ok(Message::Ack(a)) =
+                        Message::parse(packet.type_byte(), packet.payload())
                     {
                         self.tx.quality.peer_counts(a.received, a.damaged);
                         self.tx.on_ack(now, a.next_expected, a.sack);

@@ -448,6 +448,88 @@ pub struct Configure {
     pub traverse: TraverseSettings,
 }
 
+/// A setting of a configuration out of its range: its name (as in the settings
+/// file) and the rule it breaks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SettingError {
+    pub field: &'static str,
+    pub rule: &'static str,
+}
+
+impl core::fmt::Display for SettingError {
+    fn fmt(&self, f: &mut core::fmt::Formatter) -> core::fmt::Result {
+        write!(f, "{} {}", self.field, self.rule)
+    }
+}
+
+/// Most keypoints per image a configuration may ask for.
+pub const MAX_KEYPOINTS_PER_IMAGE: u32 = 100_000;
+
+impl Configure {
+    /// The limits of every setting, one place for both sides: the host checks a
+    /// settings file with them before it sends anything, the firmware every
+    /// Configure it receives, and both name the setting that breaks them.
+    pub fn validate(&self) -> Result<(), SettingError> {
+        let p = &self.pipeline;
+        let t = &self.traverse;
+        let bad = |field, rule| Err(SettingError { field, rule });
+        let finite_pos = |v: f64| v.is_finite() && v > 0.0;
+        if p.max_width == 0 || p.max_height == 0 {
+            return bad("max_width, max_height", "must be at least 1 pixel");
+        }
+        if !(1..=2).contains(&p.pixel_bytes) {
+            return bad("pixel_bytes", "must be 1 or 2");
+        }
+        if !(8..=MAX_KEYPOINTS_PER_IMAGE).contains(&p.keypoints_per_image) {
+            return bad("keypoints_per_image", "must be in 8..=100000");
+        }
+        if !(1..=8).contains(&p.octaves) {
+            return bad("octaves", "must be 1..=8");
+        }
+        if !(1..=6).contains(&p.scales_per_octave) {
+            return bad("scales_per_octave", "must be 1..=6");
+        }
+        if p.window_len < 2 {
+            return bad("window", "must be at least 2 epochs");
+        }
+        if p.fixed_epochs.is_some_and(|f| f > 64) {
+            return bad("fixed_epochs", "must be at most 64");
+        }
+        if p.track_capacity < 8 {
+            return bad("track_capacity", "must be at least 8");
+        }
+        if !(p.contrast_threshold.is_finite() && p.contrast_threshold >= 0.0) {
+            return bad("contrast_threshold", "must be finite and at least 0");
+        }
+        if !finite_pos(p.edge_ratio as f64) {
+            return bad("edge_ratio", "must be finite and positive");
+        }
+        if !(p.match_ratio > 0.0 && p.match_ratio <= 1.0) {
+            return bad("match_ratio", "must be in (0, 1]");
+        }
+        // A range below one pixel searches nothing: every epoch would be flagged.
+        if !(p.max_disparity_px.is_finite() && p.max_disparity_px >= 1.0) {
+            return bad(
+                "max_disparity_px",
+                "must be at least 1 pixel (the stereo search range)",
+            );
+        }
+        if !finite_pos(t.sigma_px) {
+            return bad("sigma_px", "must be finite and positive");
+        }
+        if !t.datum.iter().all(|v| v.is_finite()) {
+            return bad("datum", "values must be finite");
+        }
+        if !t.calibration_precision.valid() {
+            return bad(
+                "precision",
+                "principal point, focal, angles and base must be positive and finite",
+            );
+        }
+        Ok(())
+    }
+}
+
 fn parse_interior(r: &mut Reader) -> Result<Interior, ParseError> {
     Ok(Interior {
         width_px: r.u32()?,

@@ -277,7 +277,11 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
                 Transmission::TimedOut => 1,
                 Transmission::New => 2,
             };
-            if pick.map_or(true, |(_, w)| rank(why) < rank(w)) {
+            let better = match pick {
+                None => true,
+                Some((_, w)) => rank(why) < rank(w),
+            };
+            if better {
                 pick = Some((k, why));
                 if why == Transmission::Lost {
                     break;
@@ -294,7 +298,11 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
         self.transmissions = self.transmissions.wrapping_add(1);
         let start = i * self.slot_len;
         let seq = self.base.wrapping_add(k as u16);
-        Some((why, seq, &self.storage.as_ref()[start..start + s.len as usize]))
+        Some((
+            why,
+            seq,
+            &self.storage.as_ref()[start..start + s.len as usize],
+        ))
     }
 
     /// The encoded bytes of the held packet `seq`, if it is still held.

@@ -1,8 +1,8 @@
 use super::*;
 extern crate std;
-use std::vec;
 use crate::protocol::messages::{Camera, FrameChunk};
 use crate::protocol::{MAX_ENCODED, MAX_PACKET};
+use std::vec;
 
 /// Deterministic noise: xorshift64*.
 struct Noise(u64);

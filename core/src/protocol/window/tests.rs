@@ -1,1 +1,136 @@
 use super::*;
+
+/// Pushes one-byte packets numbered by their first byte.
+fn fill(w: &mut TxWindow<&mut [u8]>, n: usize) -> heapless::Vec<u16, 64> {
+    let mut seqs = heapless::Vec::new();
+    for _ in 0..n {
+        let seq = w.next_seq();
+        seqs.push(w.push(&[seq as u8, 0xAA]).unwrap()).unwrap();
+    }
+    seqs
+}
+
+/// Transmits everything due at `now`; returns the first bytes of what went out.
+fn send_all(w: &mut TxWindow<&mut [u8]>, now: u64, rto: u64) -> heapless::Vec<u8, 64> {
+    let mut out = heapless::Vec::new();
+    while let Some((_, _, p)) = w.next_transmission(now, rto) {
+        out.push(p[0]).unwrap();
+    }
+    out
+}
+
+#[test]
+fn window_holds_acks_and_replays_across_the_wrap() {
+    let mut storage = [0u8; 4 * 8];
+    let mut w = TxWindow::new(&mut storage[..], 8);
+    w.reset(65534);
+    assert_eq!(&fill(&mut w, 4)[..], &[65534, 65535, 0, 1]);
+    assert!(w.is_full());
+    assert_eq!(w.push(&[9]), Err(WindowError::Full));
+    assert_eq!(&send_all(&mut w, 0, 100)[..], &[254, 255, 0, 1]);
+    assert_eq!(w.ack(10, 65533, 0).released, 0, "stale ack");
+    assert_eq!(w.ack(10, 5, 0).released, 0, "ack beyond what was sent");
+    let out = w.ack(10, 0, 0);
+    assert_eq!(out.released, 2, "ack across the wrap");
+    assert_eq!(out.rtt_us, Some(10));
+    assert_eq!(w.base(), 0);
+    assert_eq!(w.packet(1).map(|p| p[0]), Some(1));
+    assert_eq!(w.packet(65535), None, "released");
+    // Nothing is due before the time-out; everything in flight is due after it.
+    assert!(send_all(&mut w, 50, 100).is_empty());
+    assert_eq!(&send_all(&mut w, 100, 100)[..], &[0, 1]);
+}
+
+#[test]
+fn any_slot_count_keeps_every_packet_across_the_wrap() {
+    // Five slots: with `seq % slots`, 65535 and 0 would share a slot.
+    for slots in [3usize, 5, 7] {
+        let mut storage = [0u8; 7 * 4];
+        let mut w = TxWindow::new(&mut storage[..slots * 4], 4);
+        w.reset(65530);
+        let mut acked = 65530u16;
+        for round in 0..20u16 {
+            let free = slots - w.len();
+            fill(&mut w, free);
+            // Everything held is its own packet, in order.
+            for k in 0..slots as u16 {
+                let seq = acked.wrapping_add(k);
+                assert_eq!(
+                    w.packet(seq).unwrap()[0],
+                    seq as u8,
+                    "{slots} slots, round {round}"
+                );
+            }
+            send_all(&mut w, round as u64, 1000);
+            // Acknowledge one or two, as a receiver would.
+            acked = acked.wrapping_add(1 + round % 2);
+            w.ack(round as u64, acked, 0);
+        }
+    }
+}
+
+#[test]
+fn a_gap_costs_the_missing_packet_only() {
+    let mut storage = [0u8; 16 * 4];
+    let mut w = TxWindow::new(&mut storage[..], 4);
+    fill(&mut w, 8);
+    assert_eq!(send_all(&mut w, 0, 100).len(), 8);
+    // Packet 2 lost: the receiver holds 3, 4, 5 (bits 0..2 after next_expected 2).
+    let out = w.ack(5, 2, 0b111);
+    assert_eq!((out.released, out.sacked, out.lost), (2, 3, 1));
+    assert_eq!(
+        &send_all(&mut w, 6, 100)[..],
+        &[2],
+        "only the hole goes again"
+    );
+    // The resend arrives with 6 and 7: everything is released.
+    assert_eq!(w.ack(8, 8, 0).released, 6);
+    assert!(w.is_empty());
+}
+
+#[test]
+fn a_neighbour_swap_is_not_a_loss() {
+    let mut storage = [0u8; 16 * 4];
+    let mut w = TxWindow::new(&mut storage[..], 4);
+    fill(&mut w, 8);
+    send_all(&mut w, 0, 100);
+    // 1 arrives after 2: the acknowledgement after 2 holds it, nothing is lost yet.
+    assert_eq!(w.ack(1, 1, 0b1).lost, 0);
+    assert!(send_all(&mut w, 2, 100).is_empty());
+}
+
+#[test]
+fn a_nack_resends_everything_in_flight_from_its_sequence() {
+    let mut storage = [0u8; 16 * 4];
+    let mut w = TxWindow::new(&mut storage[..], 4);
+    fill(&mut w, 5);
+    send_all(&mut w, 0, 100);
+    w.resend_from(3);
+    assert_eq!(&send_all(&mut w, 1, 100)[..], &[3, 4]);
+}
+
+#[test]
+fn the_reorder_ring_holds_after_a_gap_and_delivers_in_order() {
+    let mut storage = [0u8; 3 * 8];
+    let mut r = RxReorder::new(&mut storage[..], 8);
+    r.reset(65534);
+    assert_eq!(r.accept(65535, &[1]), Accept::Held);
+    assert_eq!(r.accept(0, &[2]), Accept::Held);
+    assert_eq!(r.accept(0, &[2]), Accept::Duplicate);
+    assert_eq!(
+        r.accept(2, &[9]),
+        Accept::Beyond,
+        "three slots: 65535, 0, 1"
+    );
+    assert_eq!(r.accept(1, &[0; 9]), Accept::Beyond, "larger than a slot");
+    assert_eq!(r.held(), 0b011);
+    assert_eq!(r.accept(65534, &[0]), Accept::Deliver);
+    let next = r.advance().expect("65535 is held");
+    assert_eq!(r.bytes(next), &[1]);
+    let next = r.advance().expect("0 is held");
+    assert_eq!(r.bytes(next), &[2]);
+    assert_eq!(r.advance(), None, "1 never came");
+    assert_eq!(r.expected(), 1);
+    assert_eq!(r.accept(0, &[2]), Accept::Duplicate);
+    assert_eq!(r.accept(1, &[3]), Accept::Deliver);
+}
