@@ -188,11 +188,13 @@ pub enum SessionError {
     )]
     PointsStalled { rounds: u32 },
     #[error(
-        "no epoch completed for {secs:.1} s over {link} ({pending} epochs outstanding); link: {summary}"
+        "no progress for {secs:.1} s over {link} while waiting for {what} ({pending} epochs \
+         outstanding): the line damages or drops too much; link: {summary}"
     )]
     NoProgress {
         secs: f64,
         link: String,
+        what: String,
         pending: usize,
         summary: String,
     },
@@ -316,7 +318,11 @@ pub struct Session<T: Transport> {
     /// Origin of the endpoint's clock.
     epoch0: Instant,
     unflushed: usize,
+    /// The last intact packet from the firmware (garbage does not count: a line
+    /// that garbles everything is a firmware that does not answer).
     last_heard: Instant,
+    /// The last sequenced message delivered from the firmware.
+    last_delivery: Instant,
     last_nudge: Instant,
     /// The last epoch result, or the first epoch sent after it.
     last_result: Instant,
@@ -382,6 +388,7 @@ impl<T: Transport> Session<T> {
             epoch0: now,
             unflushed: 0,
             last_heard: now,
+            last_delivery: now,
             last_nudge: now,
             last_result: now,
             started: now,
@@ -784,8 +791,11 @@ impl<T: Transport> Session<T> {
         };
         match self.t.recv(wait) {
             Ok(Some(bytes)) => {
-                self.last_heard = Instant::now();
+                let before = self.ep.rx.decoder_counters().packets;
                 self.absorb(&bytes);
+                if self.ep.rx.decoder_counters().packets != before {
+                    self.last_heard = Instant::now();
+                }
                 self.ep.acknowledge();
             }
             Ok(None) => {}
@@ -806,14 +816,19 @@ impl<T: Transport> Session<T> {
         let pending = self.sent_epochs.len().saturating_sub(self.results.len());
         let quiet = self.last_result.elapsed();
         if pending > 0 && quiet > self.progress_timeout {
-            return Err(SessionError::NoProgress {
-                secs: quiet.as_secs_f64(),
-                link: self.t.describe(),
-                pending,
-                summary: self.link_stats().summary(),
-            });
+            return Err(self.no_progress(quiet, "the results of the epochs sent"));
         }
         Ok(())
+    }
+
+    fn no_progress(&self, quiet: Duration, what: &str) -> SessionError {
+        SessionError::NoProgress {
+            secs: quiet.as_secs_f64(),
+            link: self.t.describe(),
+            what: what.to_string(),
+            pending: self.sent_epochs.len().saturating_sub(self.results.len()),
+            summary: self.link_stats().summary(),
+        }
     }
 
     pub fn wait_for(
@@ -821,11 +836,18 @@ impl<T: Transport> Session<T> {
         what: &str,
         done: impl Fn(&Self) -> bool,
     ) -> Result<(), SessionError> {
+        let started = Instant::now();
         loop {
             if done(self) {
                 return Ok(());
             }
             self.service(Duration::from_millis(20))?;
+            // Acknowledgements get through but no answer does (a line that lets
+            // short packets pass and damages every long one).
+            let quiet = self.last_delivery.elapsed().min(started.elapsed());
+            if quiet > self.progress_timeout {
+                return Err(self.no_progress(quiet, what));
+            }
             let silent = self.last_heard.elapsed();
             if silent > self.opts.timeout {
                 return Err(SessionError::Timeout {
@@ -863,6 +885,7 @@ impl<T: Transport> Session<T> {
             input = &input[n..];
             match event {
                 Some(Event::Message { .. }) => {
+                    self.last_delivery = Instant::now();
                     let taken = self.ep.rx.message().map(|(seq, m)| {
                         (seq, m.map(|m| (m.message_type(), Incoming::from_message(m))))
                     });

@@ -418,8 +418,13 @@ fn bad_input_is_refused_clearly_and_the_session_goes_on() {
     // Settings out of range are refused naming the setting, with the same limits
     // the host applies to a settings file (not clamped by the firmware).
     for (field, change) in [
-        ("octaves", (|c: &mut Configure| c.pipeline.octaves = 0) as fn(&mut Configure)),
-        ("keypoints_per_image", |c| c.pipeline.keypoints_per_image = 3),
+        (
+            "octaves",
+            (|c: &mut Configure| c.pipeline.octaves = 0) as fn(&mut Configure),
+        ),
+        ("keypoints_per_image", |c| {
+            c.pipeline.keypoints_per_image = 3
+        }),
         ("window", |c| c.pipeline.window_len = 1),
         ("match_ratio", |c| c.pipeline.match_ratio = 1.5),
         ("sigma_px", |c| c.traverse.sigma_px = f64::NAN),
@@ -427,7 +432,10 @@ fn bad_input_is_refused_clearly_and_the_session_goes_on() {
         let mut bad = config(W, H);
         change(&mut bad);
         let err = s.configure(&bad).unwrap_err().to_string();
-        assert!(err.contains("ConfigInvalid") && err.contains(field), "{field}: {err}");
+        assert!(
+            err.contains("ConfigInvalid") && err.contains(field),
+            "{field}: {err}"
+        );
         assert_eq!(bad.validate().unwrap_err().field, field);
     }
     s.configure(&config(W, H)).unwrap();
