@@ -136,7 +136,7 @@ impl MemoryBudget {
             .push(Component { name, bytes, kind })
             .is_err()
         {
-            self.overflow_bytes += bytes;
+            self.overflow_bytes = self.overflow_bytes.saturating_add(bytes);
         }
     }
 
@@ -146,7 +146,10 @@ impl MemoryBudget {
 
     /// Total predicted bytes.
     pub fn total(&self) -> usize {
-        self.components.iter().map(|c| c.bytes).sum::<usize>() + self.overflow_bytes
+        // Saturating: a total past the address space is refused like any too large.
+        self.components
+            .iter()
+            .fold(self.overflow_bytes, |a, c| a.saturating_add(c.bytes))
     }
 
     /// Total predicted bytes of one kind.

@@ -46,9 +46,17 @@ enum Next {
 }
 
 /// Bytes of one frame buffer for a configuration.
-pub fn frame_bytes(config: &Configure) -> usize {
+pub fn frame_bytes(config: &Configure) -> Result<usize, BuildError> {
+    usize::try_from(frame_bytes_u64(config)).map_err(|_| {
+        BuildError::Invalid("max_width x max_height x pixel_bytes: more than this target addresses")
+    })
+}
+
+/// [`frame_bytes`] before it meets the target's `usize`: the largest frame the
+/// fields allow (65535 x 65535 x 2 bytes) overflows a 32-bit one.
+pub fn frame_bytes_u64(config: &Configure) -> u64 {
     let p = &config.pipeline;
-    p.max_width as usize * p.max_height as usize * p.pixel_bytes as usize
+    p.max_width as u64 * p.max_height as u64 * p.pixel_bytes as u64
 }
 
 /// What a configuration needs from the firmware's working storage: the two frame
@@ -59,7 +67,7 @@ pub fn configuration_budget<F: ProcessorFactory>(
     config: &Configure,
     budget: &mut MemoryBudget,
 ) -> Result<(), BuildError> {
-    let frame = frame_bytes(config);
+    let frame = frame_bytes(config)?;
     budget.add(
         "firmware.frame_left",
         ComponentKind::Frame,
@@ -188,18 +196,22 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
             )?;
             return Ok(Next::Idle);
         }
-        let frame = frame_bytes(config);
         let mut budget = MemoryBudget::new();
-        if let Err(e) = configuration_budget(&self.factory, config, &mut budget) {
-            link.tx(&self.clock).error(
-                port,
-                ErrorCode::ConfigInvalid,
-                u32::MAX,
-                u16::MAX,
-                format_args!("processor: {e:?}"),
-            )?;
-            return Ok(Next::Idle);
-        }
+        let planned = configuration_budget(&self.factory, config, &mut budget)
+            .and_then(|()| frame_bytes(config));
+        let frame = match planned {
+            Ok(frame) => frame,
+            Err(e) => {
+                link.tx(&self.clock).error(
+                    port,
+                    ErrorCode::ConfigInvalid,
+                    u32::MAX,
+                    u16::MAX,
+                    format_args!("processor: {e:?}"),
+                )?;
+                return Ok(Next::Idle);
+            }
+        };
         let capacity = self.work.len();
         if budget.total() > capacity {
             link.tx(&self.clock).error(
@@ -578,5 +590,32 @@ impl<Pr: EpochProcessor> Epochs<'_, '_, Pr> {
             link: tx.counters(),
         };
         tx.send(port, &Message::Stats(stats))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use phototraverse_core::camera::{Interior, Rig};
+    use phototraverse_core::protocol::messages::{Pipeline, TraverseSettings, CONFIG_VERSION};
+
+    #[test]
+    fn the_largest_frame_the_fields_allow_is_refused_not_wrapped() {
+        let mut config = Configure {
+            version: CONFIG_VERSION,
+            rig: Rig::rectified(Interior::pinhole_px(640, 480, 700.0), 0.5),
+            pipeline: Pipeline::default(),
+            traverse: TraverseSettings::default(),
+        };
+        config.pipeline.max_width = u16::MAX;
+        config.pipeline.max_height = u16::MAX;
+        config.pipeline.pixel_bytes = 2;
+        assert_eq!(frame_bytes_u64(&config), 8_589_672_450);
+        // What a 32-bit target's `usize` makes of it: refused, not wrapped to 4.3 GB less.
+        assert!(u32::try_from(frame_bytes_u64(&config)).is_err());
+        let mut budget = MemoryBudget::new();
+        budget.add("a", ComponentKind::Frame, usize::MAX);
+        budget.add("b", ComponentKind::Frame, 2);
+        assert_eq!(budget.total(), usize::MAX, "the total saturates");
     }
 }

@@ -495,13 +495,14 @@ mod tests {
         .unwrap();
         assert_eq!(s.adjust.window, 7);
         assert!(s.adjust.sigmas.velocity_change_mps > 0.0);
+        // Out-of-range settings are the Configure's own check (the same on the host).
         let bad = TraverseSettings { sigma_px: 0.0, ..t };
-        assert!(traverse_config(&configure(bad)).is_err());
+        assert_eq!(configure(bad).validate().unwrap_err().field, "sigma_px");
         let nan = TraverseSettings {
             datum: [f64::NAN; 6],
             ..t
         };
-        assert!(traverse_config(&configure(nan)).is_err());
+        assert_eq!(configure(nan).validate().unwrap_err().field, "datum");
     }
 
     #[test]

@@ -713,22 +713,9 @@ impl<T: Transport> Session<T> {
             .collect()
     }
 
-    /// Packets in flight at most. In order, the firmware takes any packet, so a
-    /// clean line gets the whole window; once the line has lost or damaged
-    /// packets, no more than the firmware holds after a gap (its `rx_window`):
-    /// a packet beyond is dropped and comes back only after a time-out.
-    fn window_limit(&self) -> usize {
-        let sent = self.ep.tx.sent;
-        let lossy = self.ep.tx.damage_rate() > 0.0 || sent.resent_lost > 0;
-        match self.capabilities {
-            Some(c) if lossy => self.opts.window.min(c.rx_window.max(1) as usize),
-            _ => self.opts.window,
-        }
-    }
-
     /// Sends one sequenced message (waiting for window room); returns its sequence number.
     pub fn send_message(&mut self, msg: &Message) -> Result<u16, SessionError> {
-        let limit = self.window_limit();
+        let limit = self.ep.tx.send_limit();
         if self.ep.tx.in_flight() >= limit || self.ep.tx.room() == 0 {
             // Full: wait until a quarter of the window is free, so packets go in
             // bursts rather than one per acknowledgement.

@@ -264,6 +264,9 @@ pub struct Outbound<B> {
     pub sent: SentCounters,
     /// A lost packet just resent that goes out once more (see [`REPEAT_DAMAGE`]).
     repeat: Option<u16>,
+    /// Packets the peer takes beyond its next expected one while a gap is open
+    /// (its last acknowledgement's `window`).
+    peer_window: Option<u16>,
 }
 
 /// Damage rate of our packets above which a packet resent because it was lost
@@ -306,6 +309,18 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Outbound<B> {
             Ok(Ok(seq)) => Ok(seq),
             Ok(Err(_)) | Err(WindowError::TooLarge) => Err(SendError::TooLarge),
             Err(WindowError::Full) => Err(SendError::Full),
+        }
+    }
+
+    /// Packets to keep in flight at most. In order the peer takes any packet,
+    /// so a clean line gets the whole window; once the line has lost or damaged
+    /// packets, no more than the peer holds after a gap: a packet beyond it is
+    /// dropped and comes back only after a time-out.
+    pub fn send_limit(&self) -> usize {
+        let lossy = self.damage_rate() > 0.0 || self.sent.resent_lost > 0;
+        match self.peer_window {
+            Some(w) if lossy => self.window.capacity().min(w.max(1) as usize),
+            _ => self.window.capacity(),
         }
     }
 
@@ -454,6 +469,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
                 counters: LinkCounters::default(),
                 sent: SentCounters::default(),
                 repeat: None,
+                peer_window: None,
             },
             nudge: false,
             control: [0; CONTROL_WIRE],
@@ -511,6 +527,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
                         Message::parse(packet.type_byte(), packet.payload())
                     {
                         self.tx.quality.peer_counts(a.received, a.damaged);
+                        self.tx.peer_window = Some(a.window);
                         self.tx.on_ack(now, a.next_expected, a.sack);
                     }
                     continue;
@@ -532,6 +549,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
                             // A new peer session: both sequence spaces restart here.
                             self.rx.session = Some(h.session);
                             self.rx.reorder.reset(seq);
+                            self.rx.ready = None;
                             self.tx.restart();
                         }
                     }

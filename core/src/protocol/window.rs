@@ -12,6 +12,11 @@ pub fn seq_diff(a: u16, b: u16) -> i16 {
     a.wrapping_sub(b) as i16
 }
 
+/// Slots of `slot_len` bytes in `len` bytes of storage, at most [`MAX_WINDOW`].
+fn slot_count(len: usize, slot_len: usize) -> usize {
+    len.checked_div(slot_len).unwrap_or(0).min(MAX_WINDOW)
+}
+
 /// Later transmissions delivered before an unacknowledged packet is declared lost
 /// without waiting for its time-out. Three, as TCP's duplicate acknowledgement
 /// threshold: the link may swap neighbouring packets, which is not a loss.
@@ -85,12 +90,7 @@ pub struct TxWindow<B> {
 impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
     /// A window of `storage.len() / slot_len` slots (at most [`MAX_WINDOW`]).
     pub fn new(storage: B, slot_len: usize) -> Self {
-        let slots = storage
-            .as_ref()
-            .len()
-            .checked_div(slot_len)
-            .unwrap_or(0)
-            .min(MAX_WINDOW);
+        let slots = slot_count(storage.as_ref().len(), slot_len);
         TxWindow {
             storage,
             slot_len,
@@ -376,12 +376,7 @@ pub struct RxReorder<B> {
 
 impl<B: AsMut<[u8]> + AsRef<[u8]>> RxReorder<B> {
     pub fn new(storage: B, slot_len: usize) -> Self {
-        let slots = storage
-            .as_ref()
-            .len()
-            .checked_div(slot_len)
-            .unwrap_or(0)
-            .min(MAX_WINDOW);
+        let slots = slot_count(storage.as_ref().len(), slot_len);
         RxReorder {
             storage,
             slot_len,
