@@ -366,6 +366,22 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Outbound<B> {
         self.rtt.backoff = 0;
     }
 
+    /// An acknowledgement or a request to resend from the peer.
+    fn on_control(&mut self, now: u64, msg: &Message) {
+        match *msg {
+            Message::Ack(a) => {
+                self.quality.peer_counts(a.received, a.damaged);
+                self.peer_window = Some(a.window);
+                self.on_ack(now, a.next_expected, a.sack);
+            }
+            Message::Nack(n) => {
+                self.on_ack(now, n.expected, 0);
+                self.window.resend_from(n.expected);
+            }
+            _ => {}
+        }
+    }
+
     fn on_ack(&mut self, now: u64, next_expected: u16, sack: u64) {
         let out = self.window.ack(now, next_expected, sack);
         if let Some(r) = out.rtt_us {
@@ -482,14 +498,6 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
         self.rx.reorder.capacity() as u16 + 1
     }
 
-    /// Largest payload a packet may have to be held after a gap.
-    pub fn reorder_payload(&self) -> usize {
-        self.rx
-            .reorder
-            .slot_len()
-            .saturating_sub(HEADER_LEN + CRC_LEN)
-    }
-
     /// Consumes bytes of `input` until a message is ready for the application
     /// (read it with [`Inbound::message`] before the next call) or the input is
     /// used up; returns the bytes consumed and the event.
@@ -521,40 +529,24 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
                 Some(Err(_)) => continue,
             };
             let seq = packet.seq();
-            match MessageType::from_u8(packet.type_byte()) {
-                Some(MessageType::Ack) => {
-                    if let Ok(Message::Ack(a)) =
-                        Message::parse(packet.type_byte(), packet.payload())
-                    {
-                        self.tx.quality.peer_counts(a.received, a.damaged);
-                        self.tx.peer_window = Some(a.window);
-                        self.tx.on_ack(now, a.next_expected, a.sack);
-                    }
-                    continue;
+            let t = MessageType::from_u8(packet.type_byte());
+            if t.is_some_and(|t| !t.is_sequenced()) {
+                if let Ok(m) = Message::parse(packet.type_byte(), packet.payload()) {
+                    self.tx.on_control(now, &m);
                 }
-                Some(MessageType::Nack) => {
-                    if let Ok(Message::Nack(n)) =
-                        Message::parse(packet.type_byte(), packet.payload())
-                    {
-                        self.tx.on_ack(now, n.expected, 0);
-                        self.tx.window.resend_from(n.expected);
-                    }
-                    continue;
-                }
-                Some(MessageType::Hello) => {
-                    if let Ok(Message::Hello(h)) =
-                        Message::parse(packet.type_byte(), packet.payload())
-                    {
-                        if self.rx.session != Some(h.session) {
-                            // A new peer session: both sequence spaces restart here.
-                            self.rx.session = Some(h.session);
-                            self.rx.reorder.reset(seq);
-                            self.rx.ready = None;
-                            self.tx.restart();
-                        }
+                continue;
+            }
+            if t == Some(MessageType::Hello) {
+                if let Ok(Message::Hello(h)) = Message::parse(packet.type_byte(), packet.payload())
+                {
+                    if self.rx.session != Some(h.session) {
+                        // A new peer session: both sequence spaces restart here.
+                        self.rx.session = Some(h.session);
+                        self.rx.reorder.reset(seq);
+                        self.rx.ready = None;
+                        self.tx.restart();
                     }
                 }
-                _ => {}
             }
             let bytes = packet.into_inner();
             match self.rx.reorder.accept(seq, bytes) {
@@ -567,8 +559,9 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
                 Accept::Held => {
                     self.rx.held += 1;
                     self.tx.counters.gaps += 1;
-                    // Soon enough for the sender's loss detection (three later
-                    // packets), not one acknowledgement per packet.
+                    // Every second packet held: the sender's loss detection
+                    // needs three later packets acknowledged, and acknowledging
+                    // each one would double the reverse traffic.
                     self.rx.out_of_order_unacked += 1;
                     if self.rx.out_of_order_unacked % 2 == 1 {
                         self.rx.ack_now = true;
@@ -621,12 +614,6 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
                 1
             };
         }
-    }
-
-    /// Acknowledge now even if nothing new arrived (a keep-alive that lets the
-    /// peer's loss detection and time-outs run).
-    pub fn acknowledge_always(&mut self) {
-        self.rx.ack_now = true;
     }
 
     /// Asks the peer to resend everything unacknowledged now (the caller waited a
