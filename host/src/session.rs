@@ -717,7 +717,7 @@ impl<T: Transport> Session<T> {
     pub fn send_message(&mut self, msg: &Message) -> Result<u16, SessionError> {
         let limit = self.ep.tx.send_limit();
         if self.ep.tx.in_flight() >= limit || self.ep.tx.room() == 0 {
-            // Full: wait until a quarter of the window is free, so packets go in
+            // Full: wait until an eighth of the window is free, so packets go in
             // bursts rather than one per acknowledgement.
             let resume = (limit - limit / 8).max(1);
             while self.ep.tx.in_flight() >= resume || self.ep.tx.room() == 0 {
