@@ -5,7 +5,7 @@
 use core::fmt::Write as _;
 use embedded_io::{Read, Write};
 use phototraverse_core::protocol::messages::{
-    ErrorCode, ErrorMsg, LinkCounters, Message, MessageType, MAX_ERROR_TEXT,
+    ErrorCode, ErrorMsg, LinkCounters, Message, MAX_ERROR_TEXT,
 };
 use phototraverse_core::protocol::{
     wire_len, Endpoint, EndpointBuffers, EndpointConfig, Event, CRC_LEN, HEADER_LEN, MAX_ENCODED,
@@ -272,19 +272,4 @@ impl<'b> Link<'b> {
             self.transmit(port, now)?;
         }
     }
-}
-
-/// The sequenced message types the host sends and the firmware takes.
-pub fn is_host_message(t: MessageType) -> bool {
-    matches!(
-        t,
-        MessageType::Hello
-            | MessageType::Configure
-            | MessageType::FrameBegin
-            | MessageType::FrameChunk
-            | MessageType::FrameEnd
-            | MessageType::Aux
-            | MessageType::Reset
-            | MessageType::PointsRequest
-    )
 }

@@ -628,8 +628,8 @@ impl<T: Transport> Session<T> {
             oversized: d.oversized as u64,
             version_errors: d.version_errors as u64,
             resyncs: (d.crc_errors + d.framing_errors + d.truncated + d.oversized) as u64,
-            held: self.ep.rx.held as u64,
-            duplicates: self.ep.rx.duplicates as u64,
+            held: self.ep.tx.counters.gaps as u64,
+            duplicates: self.ep.tx.counters.duplicates as u64,
             bytes_received: d.bytes,
             chunk_bytes: self.chunk_now,
             damage_rate: self.ep.tx.damage_rate(),
@@ -873,11 +873,13 @@ impl<T: Transport> Session<T> {
             match event {
                 Some(Event::Message { .. }) => {
                     self.last_delivery = Instant::now();
-                    let taken = self.ep.rx.message().map(|(seq, m)| {
-                        (seq, m.map(|m| (m.message_type(), Incoming::from_message(m))))
-                    });
+                    let taken = self
+                        .ep
+                        .rx
+                        .message()
+                        .map(|(seq, m)| (seq, m.map(Incoming::from_message)));
                     match taken {
-                        Some((_, Ok((_, msg)))) => self.apply(msg),
+                        Some((_, Ok(msg))) => self.apply(msg),
                         Some((seq, Err(_))) => self.errors.push(FirmwareError {
                             code: "Malformed".into(),
                             epoch: None,

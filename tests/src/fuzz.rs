@@ -7,10 +7,11 @@
 //! `cargo run --release -p phototraverse-tests --bin fuzz-protocol -- --inputs 10000000`;
 //! the tests run a short version.
 use phototraverse_core::camera::{Interior, Rig};
+use phototraverse_core::protocol::crc::crc32;
 use phototraverse_core::protocol::messages::*;
 use phototraverse_core::protocol::{
-    encode_packet, Decoder, Endpoint, EndpointBuffers, EndpointConfig, Event, Header, MAX_ENCODED,
-    MAX_PACKET, MAX_PAYLOAD as MAX_PAYLOAD_BYTES,
+    cobs, Decoder, Endpoint, EndpointBuffers, EndpointConfig, Event, MAX_ENCODED, MAX_PACKET,
+    MAX_PAYLOAD as MAX_PAYLOAD_BYTES, PROTOCOL_VERSION,
 };
 
 /// What a run did.
@@ -161,32 +162,19 @@ fn sample_payloads() -> Vec<(u8, Vec<u8>)> {
         .collect()
 }
 
-/// A wire packet around `payload` with a valid CRC (any type byte).
+/// A wire packet around `payload` with a valid CRC, built by hand so the type
+/// byte may be one no message has.
 fn packet(type_byte: u8, seq: u16, payload: &[u8], out: &mut Vec<u8>) {
-    let mut raw = vec![0u8; MAX_PACKET];
-    let mut wire = vec![0u8; MAX_ENCODED];
-    // The encoder takes a MessageType; patch the raw type byte for unknown ones.
-    let t = MessageType::from_u8(type_byte).unwrap_or(MessageType::Hello);
-    let n = encode_packet(Header { message: t, seq }, &mut raw, &mut wire, |p| {
-        let n = payload.len().min(p.len());
-        p[..n].copy_from_slice(&payload[..n]);
-        Ok(n)
-    })
-    .expect("fits");
-    if MessageType::from_u8(type_byte).is_none() {
-        // Re-encode by hand: header with the unknown type, payload, CRC.
-        let mut body = vec![1u8, type_byte];
-        body.extend_from_slice(&seq.to_le_bytes());
-        body.extend_from_slice(&(payload.len() as u16).to_le_bytes());
-        body.extend_from_slice(payload);
-        let crc = phototraverse_core::protocol::crc::crc32(&body);
-        body.extend_from_slice(&crc.to_le_bytes());
-        let n = phototraverse_core::protocol::cobs::encode(&body, &mut wire).expect("fits");
-        out.extend_from_slice(&wire[..n]);
-        out.push(0);
-        return;
-    }
+    let mut body = vec![PROTOCOL_VERSION, type_byte];
+    body.extend_from_slice(&seq.to_le_bytes());
+    body.extend_from_slice(&(payload.len() as u16).to_le_bytes());
+    body.extend_from_slice(payload);
+    let crc = crc32(&body);
+    body.extend_from_slice(&crc.to_le_bytes());
+    let mut wire = vec![0u8; cobs::max_encoded_len(body.len())];
+    let n = cobs::encode(&body, &mut wire).expect("sized for it");
     out.extend_from_slice(&wire[..n]);
+    out.push(0);
 }
 
 /// Flips, deletes, inserts or truncates a few bytes.

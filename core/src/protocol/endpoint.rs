@@ -100,12 +100,6 @@ pub struct Inbound<B> {
     /// Decoder figures at the last damage estimate: intact and damaged runs.
     damage_mark: (u32, u32),
     damage: f32,
-    /// Packets dropped because the transmit window had no room for an answer.
-    pub busy: u32,
-    /// Packets held after a gap, duplicates, and packets beyond the ring.
-    pub held: u32,
-    pub duplicates: u32,
-    pub beyond: u32,
 }
 
 impl<B: AsMut<[u8]> + AsRef<[u8]>> Inbound<B> {
@@ -123,11 +117,6 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Inbound<B> {
     /// Decoding figures of what arrived.
     pub fn decoder_counters(&self) -> &super::decoder::DecoderCounters {
         self.decoder.counters()
-    }
-
-    /// Next sequence number expected from the peer.
-    pub fn expected(&self) -> u16 {
-        self.reorder.expected()
     }
 
     fn damaged(&self) -> u32 {
@@ -466,10 +455,6 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
                 ack_copies: 0,
                 damage_mark: (0, 0),
                 damage: 0.0,
-                busy: 0,
-                held: 0,
-                duplicates: 0,
-                beyond: 0,
             },
             tx: Outbound {
                 window: TxWindow::new(window, window_slot),
@@ -511,10 +496,8 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
                 return (used, Some(self.deliver(range)));
             }
             if used == input.len() {
-                if self.rx.ready.is_some() {
-                    // Held until acknowledgements free the transmit window.
-                    self.rx.busy += 1;
-                }
+                // A message already held waits until acknowledgements free the
+                // transmit window.
                 return (used, None);
             }
             let (n, fed) = self.rx.decoder.feed(&input[used..]);
@@ -552,12 +535,10 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
             match self.rx.reorder.accept(seq, bytes) {
                 Accept::Deliver if self.tx.room() < self.tx.cfg.tx_reserve => {
                     // No room to answer: the peer resends it once our answers are acknowledged.
-                    self.rx.busy += 1;
                     self.tx.counters.unexpected += 1;
                 }
                 Accept::Deliver => return (used, Some(self.deliver(None))),
                 Accept::Held => {
-                    self.rx.held += 1;
                     self.tx.counters.gaps += 1;
                     // Every second packet held: the sender's loss detection
                     // needs three later packets acknowledged, and acknowledging
@@ -569,14 +550,10 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
                 }
                 Accept::Duplicate => {
                     // Our acknowledgement was lost or is late: say it again.
-                    self.rx.duplicates += 1;
                     self.tx.counters.duplicates += 1;
                     self.rx.ack_now = true;
                 }
-                Accept::Beyond => {
-                    self.rx.beyond += 1;
-                    self.rx.ack_now = true;
-                }
+                Accept::Beyond => self.rx.ack_now = true,
             }
         }
     }
@@ -674,16 +651,6 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
             return Some(now);
         }
         self.tx.window.next_timeout(self.tx.rto_us())
-    }
-
-    /// Restarts both sequence spaces (a new session this side opens).
-    pub fn restart(&mut self, session: Option<u32>) {
-        self.rx.session = session;
-        self.rx.reorder.reset(0);
-        self.rx.ready = None;
-        self.rx.current = None;
-        self.rx.decoder.clear();
-        self.tx.restart();
     }
 }
 

@@ -107,11 +107,6 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
         self.slots
     }
 
-    /// Largest encoded packet a slot holds.
-    pub fn slot_len(&self) -> usize {
-        self.slot_len
-    }
-
     pub fn len(&self) -> usize {
         self.count
     }
@@ -395,11 +390,6 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> RxReorder<B> {
     /// Packets after `expected` the ring can hold.
     pub fn capacity(&self) -> usize {
         self.slots
-    }
-
-    /// Largest decoded packet a slot holds.
-    pub fn slot_len(&self) -> usize {
-        self.slot_len
     }
 
     /// Bit `i`: `expected + 1 + i` is held (the SACK bitmap).

@@ -10,6 +10,14 @@ fn fill(w: &mut TxWindow<&mut [u8]>, n: usize) -> heapless::Vec<u16, 64> {
     seqs
 }
 
+/// A window of 16 four-byte slots over `storage` with `n` packets sent at time 0.
+fn sent(storage: &mut [u8; 64], n: usize) -> TxWindow<&mut [u8]> {
+    let mut w = TxWindow::new(&mut storage[..], 4);
+    fill(&mut w, n);
+    assert_eq!(send_all(&mut w, 0, 100).len(), n);
+    w
+}
+
 /// Transmits everything due at `now`; returns the first bytes of what went out.
 fn send_all(w: &mut TxWindow<&mut [u8]>, now: u64, rto: u64) -> heapless::Vec<u8, 64> {
     let mut out = heapless::Vec::new();
@@ -72,9 +80,7 @@ fn any_slot_count_keeps_every_packet_across_the_wrap() {
 #[test]
 fn a_gap_costs_the_missing_packet_only() {
     let mut storage = [0u8; 16 * 4];
-    let mut w = TxWindow::new(&mut storage[..], 4);
-    fill(&mut w, 8);
-    assert_eq!(send_all(&mut w, 0, 100).len(), 8);
+    let mut w = sent(&mut storage, 8);
     // Packet 2 lost: the receiver holds 3, 4, 5 (bits 0..2 after next_expected 2).
     let out = w.ack(5, 2, 0b111);
     assert_eq!((out.released, out.sacked, out.lost), (2, 3, 1));
@@ -91,9 +97,7 @@ fn a_gap_costs_the_missing_packet_only() {
 #[test]
 fn a_neighbour_swap_is_not_a_loss() {
     let mut storage = [0u8; 16 * 4];
-    let mut w = TxWindow::new(&mut storage[..], 4);
-    fill(&mut w, 8);
-    send_all(&mut w, 0, 100);
+    let mut w = sent(&mut storage, 8);
     // 1 arrives after 2: the acknowledgement after 2 holds it, nothing is lost yet.
     assert_eq!(w.ack(1, 1, 0b1).lost, 0);
     assert!(send_all(&mut w, 2, 100).is_empty());
@@ -102,9 +106,7 @@ fn a_neighbour_swap_is_not_a_loss() {
 #[test]
 fn a_nack_resends_everything_in_flight_from_its_sequence() {
     let mut storage = [0u8; 16 * 4];
-    let mut w = TxWindow::new(&mut storage[..], 4);
-    fill(&mut w, 5);
-    send_all(&mut w, 0, 100);
+    let mut w = sent(&mut storage, 5);
     w.resend_from(3);
     assert_eq!(&send_all(&mut w, 1, 100)[..], &[3, 4]);
 }
