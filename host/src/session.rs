@@ -111,12 +111,10 @@ pub struct LinkStats {
     pub packets_sent: u64,
     /// Frame pixel bytes handed to the link.
     pub frame_bytes: u64,
-    /// Data packets sent again (lost, or timed out).
+    /// Data packets sent again: later packets, or a probe sent after them,
+    /// arrived and these did not.
     pub retransmitted_packets: u64,
-    /// Sent again because later packets arrived and these did not.
-    pub resent_lost: u64,
-    /// Sent again after their retransmission time-out.
-    pub resent_timeout: u64,
+    /// Retransmission time-outs; each sends a probe, not data.
     pub retransmission_timeouts: u64,
     pub acks_sent: u64,
     pub nacks_sent: u64,
@@ -141,13 +139,11 @@ impl LinkStats {
     /// One line for people: what the link did, to say why a run stopped.
     pub fn summary(&self) -> String {
         format!(
-            "{} packets sent ({} retransmitted: {} lost, {} timed out; {} retransmission \
-             time-outs; chunks of {} bytes, {:.1} % of them damaged), {} received ({} CRC \
-             errors, {} framing errors, {} oversized, {} resynchronisations, {} held after a gap)",
+            "{} packets sent ({} retransmitted after a loss; {} retransmission time-outs; \
+             chunks of {} bytes, {:.1} % of them damaged), {} received ({} CRC errors, {} \
+             framing errors, {} oversized, {} resynchronisations, {} held after a gap)",
             self.packets_sent,
             self.retransmitted_packets,
-            self.resent_lost,
-            self.resent_timeout,
             self.retransmission_timeouts,
             self.chunk_bytes,
             100.0 * self.damage_rate,
@@ -161,10 +157,10 @@ impl LinkStats {
     }
 }
 
-/// Why a session call failed.
 /// MORE answers without a point before [`Session::pull_points`] gives up.
 const MAX_EMPTY_POINTS_ROUNDS: u32 = 8;
 
+/// Why a session call failed.
 #[derive(Debug, thiserror::Error)]
 pub enum SessionError {
     #[error("the firmware did not answer for {secs:.1} s over {link} while waiting for {what}")]
@@ -616,9 +612,7 @@ impl<T: Transport> Session<T> {
         LinkStats {
             bytes_sent: sent.bytes,
             packets_sent: sent.packets,
-            retransmitted_packets: sent.resent_lost + sent.resent_timeout,
-            resent_lost: sent.resent_lost,
-            resent_timeout: sent.resent_timeout,
+            retransmitted_packets: sent.resent_lost,
             retransmission_timeouts: sent.timeouts,
             acks_sent: sent.acks,
             nacks_sent: sent.nacks,
@@ -720,8 +714,19 @@ impl<T: Transport> Session<T> {
             // Full: wait until an eighth of the window is free, so packets go in
             // bursts rather than one per acknowledgement.
             let resume = (limit - limit / 8).max(1);
+            let waiting = Instant::now();
             while self.ep.tx.in_flight() >= resume || self.ep.tx.room() == 0 {
                 self.service(Duration::from_millis(20))?;
+                // A stopped firmware acknowledges nothing, and the probes that
+                // ask it to are too small to fill the pipe and block a write.
+                let silent = self.last_heard.elapsed().min(waiting.elapsed());
+                if silent > self.opts.timeout {
+                    return Err(SessionError::Timeout {
+                        secs: silent.as_secs_f64(),
+                        link: self.t.describe(),
+                        what: "acknowledgements to free the link's window".to_string(),
+                    });
+                }
             }
         }
         let seq = match self.ep.tx.send(msg) {

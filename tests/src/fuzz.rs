@@ -137,6 +137,8 @@ pub fn sample_messages(data: &[u8]) -> Vec<Message<'_>> {
             sack: 0x8000_0000_0000_0005,
             received: 9,
             damaged: 1,
+            probe: 2,
+            answers: 0,
         }),
         Message::Nack(Nack {
             expected: 3,

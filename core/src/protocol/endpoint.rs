@@ -6,7 +6,8 @@
 //! - Selective repeat: the sender resends only what the receiver's SACK bitmap
 //!   says is missing, the receiver holds packets that arrived after a gap.
 //! - Retransmission time-out from measured round trips (RFC 6298), doubled on
-//!   each time-out and reset by progress.
+//!   each time-out and reset by progress. A time-out sends a probe, not data: the
+//!   peer's answer says what is lost, so a peer that was only busy costs no resend.
 //! - The receiver reports how many packets arrived damaged; the sender turns that
 //!   into a per-byte error rate and advises the payload size with the best
 //!   goodput ([`Outbound::advised_payload`]), so a noisy line gets short packets.
@@ -97,6 +98,8 @@ pub struct Inbound<B> {
     ack_now: bool,
     /// Copies of the next acknowledgement still to send.
     ack_copies: u8,
+    /// Number of the peer's last probe, echoed in our acknowledgements.
+    answers: u8,
     /// Decoder figures at the last damage estimate: intact and damaged runs.
     damage_mark: (u32, u32),
     damage: f32,
@@ -145,8 +148,6 @@ struct Rtt {
     srtt: Option<u64>,
     rttvar: u64,
     backoff: u32,
-    /// No further back-off before this time: one doubling per time-out event.
-    backoff_until: u64,
 }
 
 impl Rtt {
@@ -253,6 +254,11 @@ pub struct Outbound<B> {
     pub sent: SentCounters,
     /// A lost packet just resent that goes out once more (see [`REPEAT_DAMAGE`]).
     repeat: Option<u16>,
+    /// The probe waiting for its answer: its number and its place among our
+    /// transmissions.
+    probe: Option<(u8, u32)>,
+    /// Number of the last probe sent.
+    probes: u8,
     /// Packets the peer takes beyond its next expected one while a gap is open
     /// (its last acknowledgement's `window`).
     peer_window: Option<u16>,
@@ -269,13 +275,11 @@ const REPEAT_DAMAGE: f32 = 0.02;
 pub struct SentCounters {
     pub packets: u64,
     pub bytes: u64,
-    /// Resent because later packets arrived first.
+    /// Resent because later packets, or a probe sent after them, arrived first.
     pub resent_lost: u64,
-    /// Resent after a retransmission time-out.
-    pub resent_timeout: u64,
     /// Second copies of lost packets resent on a damaging line.
     pub repeats: u64,
-    /// Time-out events (each doubles the time-out).
+    /// Time-outs, each answered by a probe (each doubles the time-out).
     pub timeouts: u64,
     pub acks: u64,
     pub nacks: u64,
@@ -327,6 +331,25 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Outbound<B> {
         self.window.len()
     }
 
+    /// Whether the retransmission timer expired: if so, the number of the probe
+    /// to send, the time-out doubled and the probe awaited.
+    fn probe_due(&mut self, now: u64) -> Option<u8> {
+        if !self.window.timer_expired(now, self.rtt.rto(&self.cfg)) {
+            return None;
+        }
+        self.sent.timeouts += 1;
+        if self.damage_rate() > REPEAT_DAMAGE {
+            // On a line that damages packets a time-out is more likely a loss
+            // than a busy peer: resend what is in flight now rather than a
+            // round trip later (the probe or its answer may be damaged too).
+            self.window.lost_before(self.window.transmissions());
+        }
+        self.rtt.backoff = (self.rtt.backoff + 1).min(4);
+        self.probes = self.probes.wrapping_add(1).max(1);
+        self.probe = Some((self.probes, self.window.transmissions()));
+        Some(self.probes)
+    }
+
     /// The current retransmission time-out (µs).
     pub fn rto_us(&self) -> u64 {
         self.rtt.rto(&self.cfg)
@@ -352,6 +375,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Outbound<B> {
     pub fn restart(&mut self) {
         self.window.reset(0);
         self.repeat = None;
+        self.probe = None;
         self.rtt.backoff = 0;
     }
 
@@ -362,6 +386,13 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Outbound<B> {
                 self.quality.peer_counts(a.received, a.damaged);
                 self.peer_window = Some(a.window);
                 self.on_ack(now, a.next_expected, a.sack);
+                match self.probe {
+                    Some((number, order)) if a.answers == number => {
+                        self.probe = None;
+                        self.window.lost_before(order);
+                    }
+                    _ => {}
+                }
             }
             Message::Nack(n) => {
                 self.on_ack(now, n.expected, 0);
@@ -381,8 +412,8 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Outbound<B> {
         }
     }
 
-    /// The next data packet due at `now` (lost, timed out, new), its
-    /// transmission counted; acknowledgements go through [`Endpoint::poll_transmit`].
+    /// The next data packet due at `now` (lost, new), its transmission
+    /// counted; acknowledgements and probes go through [`Endpoint::poll_transmit`].
     pub fn poll_data(&mut self, now: u64) -> Option<&[u8]> {
         if let Some(seq) = self.repeat.take() {
             if let Some(len) = self.window.packet(seq).map(|b| b.len()) {
@@ -392,26 +423,14 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Outbound<B> {
                 return self.window.packet(seq);
             }
         }
-        let rto = self.rtt.rto(&self.cfg);
         let damage = self.damage_rate();
-        let (why, seq, bytes) = self.window.next_transmission(now, rto)?;
-        if why == Transmission::Lost && damage > REPEAT_DAMAGE {
-            self.repeat = Some(seq);
-        }
-        match why {
-            Transmission::New => {}
-            Transmission::Lost => self.sent.resent_lost += 1,
-            Transmission::TimedOut => {
-                self.sent.resent_timeout += 1;
-                if now >= self.rtt.backoff_until {
-                    self.sent.timeouts += 1;
-                    self.rtt.backoff = (self.rtt.backoff + 1).min(4);
-                    self.rtt.backoff_until = now.saturating_add(rto);
-                }
-            }
-        }
-        if why != Transmission::New {
+        let (why, seq, bytes) = self.window.next_transmission(now)?;
+        if why == Transmission::Lost {
+            self.sent.resent_lost += 1;
             self.counters.retransmissions += 1;
+            if damage > REPEAT_DAMAGE {
+                self.repeat = Some(seq);
+            }
         }
         self.sent.packets += 1;
         self.sent.bytes += bytes.len() as u64;
@@ -453,6 +472,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
                 out_of_order_unacked: 0,
                 ack_now: false,
                 ack_copies: 0,
+                answers: 0,
                 damage_mark: (0, 0),
                 damage: 0.0,
             },
@@ -463,13 +483,14 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
                     srtt: None,
                     rttvar: 0,
                     backoff: 0,
-                    backoff_until: 0,
                 },
                 quality: LineQuality::default(),
                 cfg,
                 counters: LinkCounters::default(),
                 sent: SentCounters::default(),
                 repeat: None,
+                probe: None,
+                probes: 0,
                 peer_window: None,
             },
             nudge: false,
@@ -515,6 +536,12 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
             let t = MessageType::from_u8(packet.type_byte());
             if t.is_some_and(|t| !t.is_sequenced()) {
                 if let Ok(m) = Message::parse(packet.type_byte(), packet.payload()) {
+                    if let Message::Ack(a) = m {
+                        if a.probe != 0 {
+                            self.rx.answers = a.probe;
+                            self.rx.ack_now = true;
+                        }
+                    }
                     self.tx.on_control(now, &m);
                 }
                 continue;
@@ -599,10 +626,12 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
         self.nudge = true;
     }
 
-    /// The next bytes to put on the wire at `now`: an acknowledgement, a nudge,
-    /// then data packets (lost ones first, then timed out, then new). Call until `None`.
+    /// The next bytes to put on the wire at `now`: an acknowledgement (a probe
+    /// when the retransmission timer expired), a nudge, then data packets (lost
+    /// ones first, then new). Call until `None`.
     pub fn poll_transmit(&mut self, now: u64) -> Option<&[u8]> {
-        if self.rx.ack_now {
+        let probe = self.tx.probe_due(now);
+        if self.rx.ack_now || probe.is_some() {
             self.rx.ack_copies = self.rx.ack_copies.saturating_sub(1);
             self.rx.ack_now = self.rx.ack_copies > 0;
             self.rx.delivered_unacked = 0;
@@ -614,6 +643,8 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
                 sack: self.rx.reorder.held(),
                 received: d.packets as u16,
                 damaged: self.rx.damaged() as u16,
+                probe: probe.unwrap_or(0),
+                answers: self.rx.answers,
             };
             self.tx.sent.acks += 1;
             return self.control(&Message::Ack(ack));

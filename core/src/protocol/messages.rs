@@ -1487,7 +1487,9 @@ repr!(
 /// Acknowledgement: every sequenced packet before `next_expected` arrived, the
 /// bitmap `sack` says which after it are held (bit `i`: `next_expected + 1 + i`),
 /// and two wrapping counters say how clean the line is from the receiver's side,
-/// which the sender uses to size its packets.
+/// which the sender uses to size its packets. An Ack with a `probe` number asks
+/// the peer for an Ack at once, which carries that number in `answers`: a sender
+/// whose retransmission timer expired learns what is lost before it resends anything.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Ack {
     pub next_expected: u16,
@@ -1498,6 +1500,10 @@ pub struct Ack {
     pub received: u16,
     /// Damaged runs (CRC, framing, oversized, truncated) received so far (wrapping).
     pub damaged: u16,
+    /// Number of this probe (1 to 255, wrapping), 0 when it is no probe.
+    pub probe: u8,
+    /// Number of the last probe of the peer answered, 0 before the first.
+    pub answers: u8,
 }
 repr!(
     Ack,
@@ -1509,6 +1515,8 @@ repr!(
             sack: r.u64()?,
             received: r.u16()?,
             damaged: r.u16()?,
+            probe: r.u8()?,
+            answers: r.u8()?,
         })
     },
     |s, w| {
@@ -1517,6 +1525,8 @@ repr!(
         w.u64(s.sack)?;
         w.u16(s.received)?;
         w.u16(s.damaged)?;
+        w.u8(s.probe)?;
+        w.u8(s.answers)?;
     }
 );
 

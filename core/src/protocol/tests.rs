@@ -102,6 +102,8 @@ fn sample_messages(chunk: &[u8]) -> [Message<'_>; 16] {
             sack: 0x8000_0000_0000_0005,
             received: 65000,
             damaged: 17,
+            probe: 255,
+            answers: 3,
         }),
         Message::Nack(Nack {
             expected: 3,

@@ -55,10 +55,9 @@ pub struct AckOutcome {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Transmission {
     New,
-    /// Resent because later packets arrived and this one did not.
+    /// Resent because later packets (or a probe sent after it) arrived and this
+    /// one did not.
     Lost,
-    /// Resent because its retransmission time-out expired.
-    TimedOut,
 }
 
 /// A packet could not be held.
@@ -85,6 +84,10 @@ pub struct TxWindow<B> {
     count: usize,
     /// Transmissions so far (the order of the next one).
     transmissions: u32,
+    /// Start of the retransmission timer: the last progress (an acknowledgement
+    /// that released or held something new), the last probe, or the first
+    /// transmission into an empty flight; `None` while nothing is in flight.
+    timer: Option<u64>,
 }
 
 impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
@@ -100,6 +103,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
             head: 0,
             count: 0,
             transmissions: 0,
+            timer: None,
         }
     }
 
@@ -134,6 +138,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
         self.base = next_seq;
         self.head = 0;
         self.count = 0;
+        self.timer = None;
     }
 
     /// The slot of the packet `k` places after the oldest (`k < slots`).
@@ -229,7 +234,39 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
         if let Some(latest) = latest {
             out.lost = self.mark_lost(latest);
         }
+        if out.released + out.sacked > 0 {
+            self.timer = self.in_flight().then_some(now);
+        }
         out
+    }
+
+    /// Whether a packet was sent and neither acknowledged nor declared lost.
+    fn in_flight(&self) -> bool {
+        (0..self.count)
+            .map(|k| self.state[self.slot_at(k)])
+            .any(|s| s.sent_at.is_some() && !s.sacked && !s.lost)
+    }
+
+    /// The order the next transmission gets: a probe sent now stands after
+    /// every packet sent before it.
+    pub fn transmissions(&self) -> u32 {
+        self.transmissions
+    }
+
+    /// Declares lost every packet in flight sent before the transmission
+    /// `order`: the peer answered a probe sent after them and does not hold them.
+    pub fn lost_before(&mut self, order: u32) -> usize {
+        let mut lost = 0;
+        for k in 0..self.count {
+            let i = self.slot_at(k);
+            let s = &mut self.state[i];
+            let before = (s.order.wrapping_sub(order) as i32) < 0;
+            if s.sent_at.is_some() && !s.sacked && !s.lost && before {
+                s.lost = true;
+                lost += 1;
+            }
+        }
+        lost
     }
 
     /// Declares lost the packets sent enough transmissions before the latest one
@@ -253,37 +290,29 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
     }
 
     /// The next packet to put on the wire at `now`: lost packets first, then
-    /// packets whose time-out `rto` expired, then new ones. Records the transmission.
-    pub fn next_transmission(&mut self, now: u64, rto: u64) -> Option<(Transmission, u16, &[u8])> {
+    /// new ones. Records the transmission. A time-out resends nothing by itself:
+    /// it sends a probe (see [`TxWindow::timer_expired`]), and the answer says
+    /// what is lost, so a receiver that was only busy costs no resend.
+    pub fn next_transmission(&mut self, now: u64) -> Option<(Transmission, u16, &[u8])> {
         let mut pick = None;
         for k in 0..self.count {
             let s = &self.state[self.slot_at(k)];
             if s.sacked {
                 continue;
             }
-            let why = match s.sent_at {
-                None => Transmission::New,
-                Some(_) if s.lost => Transmission::Lost,
-                Some(t) if now.saturating_sub(t) >= rto => Transmission::TimedOut,
-                Some(_) => continue,
-            };
-            let rank = |w: Transmission| match w {
-                Transmission::Lost => 0,
-                Transmission::TimedOut => 1,
-                Transmission::New => 2,
-            };
-            let better = match pick {
-                None => true,
-                Some((_, w)) => rank(why) < rank(w),
-            };
-            if better {
-                pick = Some((k, why));
-                if why == Transmission::Lost {
+            match s.sent_at {
+                Some(_) if s.lost => {
+                    pick = Some((k, Transmission::Lost));
                     break;
                 }
+                None if pick.is_none() => pick = Some((k, Transmission::New)),
+                _ => {}
             }
         }
         let (k, why) = pick?;
+        if self.timer.is_none() {
+            self.timer = Some(now);
+        }
         let i = self.slot_at(k);
         let s = &mut self.state[i];
         s.retransmitted |= why != Transmission::New;
@@ -311,13 +340,23 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
         Some(&self.storage.as_ref()[start..start + self.state[i].len as usize])
     }
 
-    /// Earliest time a sent packet's time-out `rto` expires, if any is in flight.
+    /// When the retransmission timer expires with the time-out `rto`, if
+    /// anything is in flight.
     pub fn next_timeout(&self, rto: u64) -> Option<u64> {
-        (0..self.count)
-            .map(|k| self.state[self.slot_at(k)])
-            .filter(|s| !s.sacked)
-            .filter_map(|s| s.sent_at.map(|t| t.saturating_add(rto)))
-            .min()
+        let start = self.timer?;
+        self.in_flight().then(|| start.saturating_add(rto))
+    }
+
+    /// Whether the timer expired at `now`; if so it restarts (the caller sends
+    /// a probe), so one expiry is one event.
+    pub fn timer_expired(&mut self, now: u64, rto: u64) -> bool {
+        match self.next_timeout(rto) {
+            Some(at) if now >= at => {
+                self.timer = Some(now);
+                true
+            }
+            _ => false,
+        }
     }
 
     /// Whether a packet waits to be sent or resent without a timer.

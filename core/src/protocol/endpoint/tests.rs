@@ -160,9 +160,62 @@ fn drops_cost_the_lost_packets_not_the_window() {
 fn bit_errors_and_drops_deliver_everything_in_order() {
     for seed in 1..4 {
         let tx = transfer(1000, 1e-4, 0.01, seed, 200, 20_000);
-        // 237-byte packets: 17 % damaged at 1e-4, one more percent dropped.
-        assert!(tx < 1000 * 135 / 100, "seed {seed}: {tx} transmissions");
+        // 237-byte packets: 17 % damaged at 1e-4, one more percent dropped, and
+        // the resends whose loss only a probe reveals.
+        assert!(tx < 1000 * 138 / 100, "seed {seed}: {tx} transmissions");
     }
+}
+
+/// `b` reads nothing for `busy` ms while `a` sends `n` chunks, as a firmware
+/// busy with an epoch; the line loses nothing. Returns `a`'s sent counters.
+fn busy_receiver(n: u32, busy: u64) -> SentCounters {
+    let mut a = endpoint(32, 32);
+    let mut b = endpoint(32, 32);
+    let mut data = vec![0u8; 200];
+    for k in 0..n {
+        a.tx.send(&Message::FrameChunk(chunk_of(k, &mut data)))
+            .unwrap();
+    }
+    let (mut ab, mut ba) = (std::vec::Vec::new(), std::vec::Vec::new());
+    let mut got = 0;
+    for step in 0..busy + 100 {
+        let now = step * 1000;
+        while let Some(p) = a.poll_transmit(now) {
+            ab.extend_from_slice(p);
+        }
+        if step >= busy {
+            let mut rest = &core::mem::take(&mut ab)[..];
+            while !rest.is_empty() {
+                let (used, ev) = b.receive(now, rest);
+                rest = &rest[used..];
+                got += matches!(ev, Some(Event::Message { .. })) as u32;
+            }
+            b.acknowledge();
+            while let Some(p) = b.poll_transmit(now) {
+                ba.extend_from_slice(p);
+            }
+        }
+        let mut rest = &core::mem::take(&mut ba)[..];
+        while !rest.is_empty() {
+            let (used, _) = a.receive(now, rest);
+            rest = &rest[used..];
+        }
+    }
+    assert_eq!(
+        (got, a.tx.in_flight()),
+        (n, 0),
+        "all delivered and released"
+    );
+    a.tx.sent
+}
+
+#[test]
+fn a_busy_receiver_costs_probes_not_resends() {
+    let sent = busy_receiver(32, 300);
+    assert_eq!(sent.resent_lost, 0, "nothing was lost");
+    // Time-outs at 20, 60, 140 and 300 ms (doubling from 20 ms): a probe each.
+    assert_eq!(sent.timeouts, 4);
+    assert_eq!(sent.packets - sent.acks, 32);
 }
 
 #[test]

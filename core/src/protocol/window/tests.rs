@@ -14,14 +14,14 @@ fn fill(w: &mut TxWindow<&mut [u8]>, n: usize) -> heapless::Vec<u16, 64> {
 fn sent(storage: &mut [u8; 64], n: usize) -> TxWindow<&mut [u8]> {
     let mut w = TxWindow::new(&mut storage[..], 4);
     fill(&mut w, n);
-    assert_eq!(send_all(&mut w, 0, 100).len(), n);
+    assert_eq!(send_all(&mut w, 0).len(), n);
     w
 }
 
 /// Transmits everything due at `now`; returns the first bytes of what went out.
-fn send_all(w: &mut TxWindow<&mut [u8]>, now: u64, rto: u64) -> heapless::Vec<u8, 64> {
+fn send_all(w: &mut TxWindow<&mut [u8]>, now: u64) -> heapless::Vec<u8, 64> {
     let mut out = heapless::Vec::new();
-    while let Some((_, _, p)) = w.next_transmission(now, rto) {
+    while let Some((_, _, p)) = w.next_transmission(now) {
         out.push(p[0]).unwrap();
     }
     out
@@ -35,7 +35,7 @@ fn window_holds_acks_and_replays_across_the_wrap() {
     assert_eq!(&fill(&mut w, 4)[..], &[65534, 65535, 0, 1]);
     assert!(w.is_full());
     assert_eq!(w.push(&[9]), Err(WindowError::Full));
-    assert_eq!(&send_all(&mut w, 0, 100)[..], &[254, 255, 0, 1]);
+    assert_eq!(&send_all(&mut w, 0)[..], &[254, 255, 0, 1]);
     assert_eq!(w.ack(10, 65533, 0).released, 0, "stale ack");
     assert_eq!(w.ack(10, 5, 0).released, 0, "ack beyond what was sent");
     let out = w.ack(10, 0, 0);
@@ -44,9 +44,31 @@ fn window_holds_acks_and_replays_across_the_wrap() {
     assert_eq!(w.base(), 0);
     assert_eq!(w.packet(1).map(|p| p[0]), Some(1));
     assert_eq!(w.packet(65535), None, "released");
-    // Nothing is due before the time-out; everything in flight is due after it.
-    assert!(send_all(&mut w, 50, 100).is_empty());
-    assert_eq!(&send_all(&mut w, 100, 100)[..], &[0, 1]);
+    // The timer restarted with the progress at 10: it expires at 110, once.
+    assert!(!w.timer_expired(109, 100));
+    assert!(w.timer_expired(110, 100));
+    assert!(!w.timer_expired(111, 100), "one expiry is one event");
+    assert!(
+        send_all(&mut w, 110).is_empty(),
+        "a time-out resends nothing"
+    );
+}
+
+#[test]
+fn a_probe_answered_declares_lost_what_was_sent_before_it() {
+    let mut storage = [0u8; 16 * 4];
+    let mut w = sent(&mut storage, 6);
+    assert_eq!(w.next_timeout(100), Some(100));
+    assert!(w.timer_expired(100, 100));
+    let probe = w.transmissions();
+    fill(&mut w, 1);
+    assert_eq!(&send_all(&mut w, 101)[..], &[6], "sent after the probe");
+    // The answer: 0 and 1 arrived, 2..5 did not; 6 may still be on its way.
+    let out = w.ack(150, 2, 0);
+    assert_eq!(out.lost, 0, "too few later deliveries to call a loss");
+    assert_eq!(w.lost_before(probe), 4);
+    assert_eq!(&send_all(&mut w, 151)[..], &[2, 3, 4, 5]);
+    assert_eq!(w.lost_before(probe), 0, "resent after the probe");
 }
 
 #[test]
@@ -69,7 +91,7 @@ fn any_slot_count_keeps_every_packet_across_the_wrap() {
                     "{slots} slots, round {round}"
                 );
             }
-            send_all(&mut w, round as u64, 1000);
+            send_all(&mut w, round as u64);
             // Acknowledge one or two, as a receiver would.
             acked = acked.wrapping_add(1 + round % 2);
             w.ack(round as u64, acked, 0);
@@ -84,11 +106,7 @@ fn a_gap_costs_the_missing_packet_only() {
     // Packet 2 lost: the receiver holds 3, 4, 5 (bits 0..2 after next_expected 2).
     let out = w.ack(5, 2, 0b111);
     assert_eq!((out.released, out.sacked, out.lost), (2, 3, 1));
-    assert_eq!(
-        &send_all(&mut w, 6, 100)[..],
-        &[2],
-        "only the hole goes again"
-    );
+    assert_eq!(&send_all(&mut w, 6)[..], &[2], "only the hole goes again");
     // The resend arrives with 6 and 7: everything is released.
     assert_eq!(w.ack(8, 8, 0).released, 6);
     assert!(w.is_empty());
@@ -100,7 +118,7 @@ fn a_neighbour_swap_is_not_a_loss() {
     let mut w = sent(&mut storage, 8);
     // 1 arrives after 2: the acknowledgement after 2 holds it, nothing is lost yet.
     assert_eq!(w.ack(1, 1, 0b1).lost, 0);
-    assert!(send_all(&mut w, 2, 100).is_empty());
+    assert!(send_all(&mut w, 2).is_empty());
 }
 
 #[test]
@@ -108,7 +126,7 @@ fn a_nack_resends_everything_in_flight_from_its_sequence() {
     let mut storage = [0u8; 16 * 4];
     let mut w = sent(&mut storage, 5);
     w.resend_from(3);
-    assert_eq!(&send_all(&mut w, 1, 100)[..], &[3, 4]);
+    assert_eq!(&send_all(&mut w, 1)[..], &[3, 4]);
 }
 
 #[test]
