@@ -111,10 +111,13 @@ pub struct LinkStats {
     pub packets_sent: u64,
     /// Frame pixel bytes handed to the link.
     pub frame_bytes: u64,
-    /// Data packets sent again: later packets, or a probe sent after them,
-    /// arrived and these did not.
+    /// Data packets sent again (lost, or with a time-out's probe).
     pub retransmitted_packets: u64,
-    /// Retransmission time-outs; each sends a probe, not data.
+    /// Sent again because later packets, or a probe sent after them, arrived
+    /// and these did not.
+    pub resent_lost: u64,
+    /// Sent again with a time-out's probe: the oldest in flight, one per time-out.
+    pub resent_timeout: u64,
     pub retransmission_timeouts: u64,
     pub acks_sent: u64,
     pub nacks_sent: u64,
@@ -139,11 +142,14 @@ impl LinkStats {
     /// One line for people: what the link did, to say why a run stopped.
     pub fn summary(&self) -> String {
         format!(
-            "{} packets sent ({} retransmitted after a loss; {} retransmission time-outs; \
-             chunks of {} bytes, {:.1} % of them damaged), {} received ({} CRC errors, {} \
-             framing errors, {} oversized, {} resynchronisations, {} held after a gap)",
+            "{} packets sent ({} retransmitted: {} lost, {} with a time-out's probe; {} \
+             retransmission time-outs; chunks of {} bytes, {:.1} % of them damaged), {} \
+             received ({} CRC errors, {} framing errors, {} oversized, {} \
+             resynchronisations, {} held after a gap)",
             self.packets_sent,
             self.retransmitted_packets,
+            self.resent_lost,
+            self.resent_timeout,
             self.retransmission_timeouts,
             self.chunk_bytes,
             100.0 * self.damage_rate,
@@ -612,7 +618,9 @@ impl<T: Transport> Session<T> {
         LinkStats {
             bytes_sent: sent.bytes,
             packets_sent: sent.packets,
-            retransmitted_packets: sent.resent_lost,
+            retransmitted_packets: sent.resent_lost + sent.resent_timeout,
+            resent_lost: sent.resent_lost,
+            resent_timeout: sent.resent_timeout,
             retransmission_timeouts: sent.timeouts,
             acks_sent: sent.acks,
             nacks_sent: sent.nacks,

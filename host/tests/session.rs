@@ -214,9 +214,13 @@ fn inproc_session_returns_a_result_per_epoch() {
     assert_eq!(s.result(5).unwrap().status, EpochStatus::FeaturesOnly);
     let link = s.link_stats();
     assert_eq!(link.frame_bytes, 6 * 2 * W as u64 * H as u64);
-    assert_eq!(
-        link.retransmitted_packets, 0,
-        "a clean link needs no retransmission"
+    // A clean link loses nothing. A firmware starved of the CPU (a loaded
+    // machine) may let the host's timer expire, and each time-out resends the
+    // oldest packet with its probe, never the window.
+    assert_eq!(link.resent_lost, 0, "a clean link loses nothing");
+    assert!(
+        link.resent_timeout <= link.retransmission_timeouts,
+        "one packet per time-out: {link:?}"
     );
     assert!(s.errors().is_empty(), "{:?}", s.errors());
 }

@@ -6,8 +6,9 @@
 //! - Selective repeat: the sender resends only what the receiver's SACK bitmap
 //!   says is missing, the receiver holds packets that arrived after a gap.
 //! - Retransmission time-out from measured round trips (RFC 6298), doubled on
-//!   each time-out and reset by progress. A time-out sends a probe, not data: the
-//!   peer's answer says what is lost, so a peer that was only busy costs no resend.
+//!   each time-out and reset by progress. A time-out sends a probe and the
+//!   oldest packet, not the window: the peer's answer says what else is lost, so
+//!   a peer that was only busy costs one packet per time-out.
 //! - The receiver reports how many packets arrived damaged; the sender turns that
 //!   into a per-byte error rate and advises the payload size with the best
 //!   goodput ([`Outbound::advised_payload`]), so a noisy line gets short packets.
@@ -259,6 +260,8 @@ pub struct Outbound<B> {
     probe: Option<(u8, u32)>,
     /// Number of the last probe sent.
     probes: u8,
+    /// The oldest packet goes again after the probe.
+    probe_resend: bool,
     /// Packets the peer takes beyond its next expected one while a gap is open
     /// (its last acknowledgement's `window`).
     peer_window: Option<u16>,
@@ -277,6 +280,8 @@ pub struct SentCounters {
     pub bytes: u64,
     /// Resent because later packets, or a probe sent after them, arrived first.
     pub resent_lost: u64,
+    /// Resent with a probe: the oldest packet in flight, one per time-out.
+    pub resent_timeout: u64,
     /// Second copies of lost packets resent on a damaging line.
     pub repeats: u64,
     /// Time-outs, each answered by a probe (each doubles the time-out).
@@ -334,19 +339,22 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Outbound<B> {
     /// Whether the retransmission timer expired: if so, the number of the probe
     /// to send, the time-out doubled and the probe awaited.
     fn probe_due(&mut self, now: u64) -> Option<u8> {
-        if !self.window.timer_expired(now, self.rtt.rto(&self.cfg)) {
+        let rto = self.rtt.rto(&self.cfg);
+        if !self.window.timer_expired(now, rto) {
             return None;
         }
         self.sent.timeouts += 1;
         if self.damage_rate() > REPEAT_DAMAGE {
             // On a line that damages packets a time-out is more likely a loss
-            // than a busy peer: resend what is in flight now rather than a
-            // round trip later (the probe or its answer may be damaged too).
-            self.window.lost_before(self.window.transmissions());
+            // than a busy peer: resend what has been in flight for a time-out
+            // now rather than a round trip later (the probe or its answer may
+            // be damaged too).
+            self.window.lost_sent_by(now.saturating_sub(rto));
         }
         self.rtt.backoff = (self.rtt.backoff + 1).min(4);
         self.probes = self.probes.wrapping_add(1).max(1);
         self.probe = Some((self.probes, self.window.transmissions()));
+        self.probe_resend = true;
         Some(self.probes)
     }
 
@@ -376,6 +384,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Outbound<B> {
         self.window.reset(0);
         self.repeat = None;
         self.probe = None;
+        self.probe_resend = false;
         self.rtt.backoff = 0;
     }
 
@@ -412,14 +421,26 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Outbound<B> {
         }
     }
 
-    /// The next data packet due at `now` (lost, new), its transmission
-    /// counted; acknowledgements and probes go through [`Endpoint::poll_transmit`].
+    /// The next data packet due at `now` (the oldest after a probe, lost, new),
+    /// its transmission counted; acknowledgements and probes go through
+    /// [`Endpoint::poll_transmit`].
     pub fn poll_data(&mut self, now: u64) -> Option<&[u8]> {
         if let Some(seq) = self.repeat.take() {
             if let Some(len) = self.window.packet(seq).map(|b| b.len()) {
                 self.sent.packets += 1;
                 self.sent.repeats += 1;
                 self.sent.bytes += len as u64;
+                return self.window.packet(seq);
+            }
+        }
+        if core::mem::take(&mut self.probe_resend) {
+            if let Some(seq) = self.window.resend_oldest(now) {
+                let len = self.window.packet(seq).map_or(0, |b| b.len());
+                self.sent.packets += 1;
+                self.sent.resent_timeout += 1;
+                self.sent.bytes += len as u64;
+                self.counters.retransmissions += 1;
+                self.quality.sent(len);
                 return self.window.packet(seq);
             }
         }
@@ -491,6 +512,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
                 repeat: None,
                 probe: None,
                 probes: 0,
+                probe_resend: false,
                 peer_window: None,
             },
             nudge: false,
@@ -678,7 +700,13 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Endpoint<B> {
     /// When [`Endpoint::poll_transmit`] will have something without new input:
     /// now when something is due, else the earliest retransmission time-out.
     pub fn poll_at(&self, now: u64) -> Option<u64> {
-        if self.rx.ack_now || self.nudge || self.tx.repeat.is_some() || self.tx.window.has_due() {
+        let tx = &self.tx;
+        if self.rx.ack_now
+            || self.nudge
+            || tx.repeat.is_some()
+            || tx.probe_resend
+            || tx.window.has_due()
+        {
             return Some(now);
         }
         self.tx.window.next_timeout(self.tx.rto_us())

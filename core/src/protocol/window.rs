@@ -256,12 +256,20 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
     /// Declares lost every packet in flight sent before the transmission
     /// `order`: the peer answered a probe sent after them and does not hold them.
     pub fn lost_before(&mut self, order: u32) -> usize {
+        self.declare_lost(|s| (s.order.wrapping_sub(order) as i32) < 0)
+    }
+
+    /// Declares lost every packet in flight last sent at or before `time`.
+    pub fn lost_sent_by(&mut self, time: u64) -> usize {
+        self.declare_lost(|s| s.sent_at.is_some_and(|t| t <= time))
+    }
+
+    fn declare_lost(&mut self, lost_if: impl Fn(&Slot) -> bool) -> usize {
         let mut lost = 0;
         for k in 0..self.count {
             let i = self.slot_at(k);
             let s = &mut self.state[i];
-            let before = (s.order.wrapping_sub(order) as i32) < 0;
-            if s.sent_at.is_some() && !s.sacked && !s.lost && before {
+            if s.sent_at.is_some() && !s.sacked && !s.lost && lost_if(s) {
                 s.lost = true;
                 lost += 1;
             }
@@ -290,9 +298,9 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
     }
 
     /// The next packet to put on the wire at `now`: lost packets first, then
-    /// new ones. Records the transmission. A time-out resends nothing by itself:
-    /// it sends a probe (see [`TxWindow::timer_expired`]), and the answer says
-    /// what is lost, so a receiver that was only busy costs no resend.
+    /// new ones. Records the transmission. A time-out resends only the oldest
+    /// packet, with a probe (see [`TxWindow::timer_expired`]); the answer says
+    /// what else is lost, so a receiver that was only busy costs one packet.
     pub fn next_transmission(&mut self, now: u64) -> Option<(Transmission, u16, &[u8])> {
         let mut pick = None;
         for k in 0..self.count {
@@ -327,6 +335,24 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
             seq,
             &self.storage.as_ref()[start..start + s.len as usize],
         ))
+    }
+
+    /// Records a resend of the oldest packet in flight (a time-out's probe
+    /// carries it: the packet most likely to hold the window up); returns its
+    /// sequence number.
+    pub fn resend_oldest(&mut self, now: u64) -> Option<u16> {
+        let k = (0..self.count).find(|&k| {
+            let s = &self.state[self.slot_at(k)];
+            s.sent_at.is_some() && !s.sacked
+        })?;
+        let i = self.slot_at(k);
+        let s = &mut self.state[i];
+        s.retransmitted = true;
+        s.sent_at = Some(now);
+        s.lost = false;
+        s.order = self.transmissions;
+        self.transmissions = self.transmissions.wrapping_add(1);
+        Some(self.base.wrapping_add(k as u16))
     }
 
     /// The encoded bytes of the held packet `seq`, if it is still held.

@@ -160,9 +160,10 @@ fn drops_cost_the_lost_packets_not_the_window() {
 fn bit_errors_and_drops_deliver_everything_in_order() {
     for seed in 1..4 {
         let tx = transfer(1000, 1e-4, 0.01, seed, 200, 20_000);
-        // 237-byte packets: 17 % damaged at 1e-4, one more percent dropped, and
-        // the resends whose loss only a probe reveals.
-        assert!(tx < 1000 * 138 / 100, "seed {seed}: {tx} transmissions");
+        // 237-byte packets: 17 % damaged at 1e-4, one more percent dropped, the
+        // acknowledgements damaged with them, and on this damaging line the
+        // resends of what a time-out finds in flight (1321 to 1402 of 1000).
+        assert!(tx < 1000 * 145 / 100, "seed {seed}: {tx} transmissions");
     }
 }
 
@@ -210,12 +211,14 @@ fn busy_receiver(n: u32, busy: u64) -> SentCounters {
 }
 
 #[test]
-fn a_busy_receiver_costs_probes_not_resends() {
+fn a_busy_receiver_costs_a_packet_per_time_out_not_the_window() {
     let sent = busy_receiver(32, 300);
     assert_eq!(sent.resent_lost, 0, "nothing was lost");
-    // Time-outs at 20, 60, 140 and 300 ms (doubling from 20 ms): a probe each.
+    // Time-outs at 20, 60, 140 and 300 ms (doubling from 20 ms): a probe and
+    // the oldest packet each.
     assert_eq!(sent.timeouts, 4);
-    assert_eq!(sent.packets - sent.acks, 32);
+    assert_eq!(sent.resent_timeout, 4);
+    assert_eq!(sent.packets - sent.acks, 32 + 4);
 }
 
 #[test]

@@ -50,8 +50,9 @@ fn window_holds_acks_and_replays_across_the_wrap() {
     assert!(!w.timer_expired(111, 100), "one expiry is one event");
     assert!(
         send_all(&mut w, 110).is_empty(),
-        "a time-out resends nothing"
+        "a time-out resends nothing by itself"
     );
+    assert_eq!(w.resend_oldest(110), Some(0), "its probe takes the oldest");
 }
 
 #[test]
