@@ -421,31 +421,36 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Outbound<B> {
         }
     }
 
-    /// The next data packet due at `now` (the oldest after a probe, lost, new),
-    /// its transmission counted; acknowledgements and probes go through
-    /// [`Endpoint::poll_transmit`].
+    /// The next data packet due at `now` (a second copy of a lost one, the
+    /// oldest after a probe, lost, new), its transmission counted;
+    /// acknowledgements and probes go through [`Endpoint::poll_transmit`].
     pub fn poll_data(&mut self, now: u64) -> Option<&[u8]> {
+        let seq = self.next_data(now)?;
+        let len = self.window.packet(seq)?.len();
+        self.sent.packets += 1;
+        self.sent.bytes += len as u64;
+        // The peer's counts cover every copy, so the mean length does too.
+        self.quality.sent(len);
+        self.window.packet(seq)
+    }
+
+    /// Chooses the next data packet and counts why it goes.
+    fn next_data(&mut self, now: u64) -> Option<u16> {
         if let Some(seq) = self.repeat.take() {
-            if let Some(len) = self.window.packet(seq).map(|b| b.len()) {
-                self.sent.packets += 1;
+            if self.window.packet(seq).is_some() {
                 self.sent.repeats += 1;
-                self.sent.bytes += len as u64;
-                return self.window.packet(seq);
+                return Some(seq);
             }
         }
         if core::mem::take(&mut self.probe_resend) {
             if let Some(seq) = self.window.resend_oldest(now) {
-                let len = self.window.packet(seq).map_or(0, |b| b.len());
-                self.sent.packets += 1;
                 self.sent.resent_timeout += 1;
-                self.sent.bytes += len as u64;
                 self.counters.retransmissions += 1;
-                self.quality.sent(len);
-                return self.window.packet(seq);
+                return Some(seq);
             }
         }
         let damage = self.damage_rate();
-        let (why, seq, bytes) = self.window.next_transmission(now)?;
+        let (why, seq, _) = self.window.next_transmission(now)?;
         if why == Transmission::Lost {
             self.sent.resent_lost += 1;
             self.counters.retransmissions += 1;
@@ -453,10 +458,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Outbound<B> {
                 self.repeat = Some(seq);
             }
         }
-        self.sent.packets += 1;
-        self.sent.bytes += bytes.len() as u64;
-        self.quality.sent(bytes.len());
-        Some(bytes)
+        Some(seq)
     }
 }
 
