@@ -728,13 +728,7 @@ impl<T: Transport> Session<T> {
                 // A stopped firmware acknowledges nothing, and the probes that
                 // ask it to are too small to fill the pipe and block a write.
                 let silent = self.last_heard.elapsed().min(waiting.elapsed());
-                if silent > self.opts.timeout {
-                    return Err(SessionError::Timeout {
-                        secs: silent.as_secs_f64(),
-                        link: self.t.describe(),
-                        what: "acknowledgements to free the link's window".to_string(),
-                    });
-                }
+                self.check_silence(silent, "acknowledgements to free the link's window")?;
             }
         }
         let seq = match self.ep.tx.send(msg) {
@@ -849,13 +843,7 @@ impl<T: Transport> Session<T> {
                 return Err(self.no_progress(quiet, what));
             }
             let silent = self.last_heard.elapsed();
-            if silent > self.opts.timeout {
-                return Err(SessionError::Timeout {
-                    secs: silent.as_secs_f64(),
-                    link: self.t.describe(),
-                    what: what.to_string(),
-                });
-            }
+            self.check_silence(silent, what)?;
             let rto = Duration::from_micros(self.ep.tx.rto_us());
             if silent > rto && self.last_nudge.elapsed() > rto {
                 // An answer of the firmware may be lost and the firmware has no
@@ -864,6 +852,19 @@ impl<T: Transport> Session<T> {
                 self.ep.nudge();
             }
         }
+    }
+
+    /// Nothing intact heard for `silent`: past the link time-out, the firmware
+    /// does not answer.
+    fn check_silence(&self, silent: Duration, what: &str) -> Result<(), SessionError> {
+        if silent > self.opts.timeout {
+            return Err(SessionError::Timeout {
+                secs: silent.as_secs_f64(),
+                link: self.t.describe(),
+                what: what.to_string(),
+            });
+        }
+        Ok(())
     }
 
     /// Flushes the transport; also when nothing is buffered, so a transport whose
