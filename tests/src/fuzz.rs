@@ -6,12 +6,12 @@
 //! The long run is the `fuzz-protocol` binary:
 //! `cargo run --release -p phototraverse-tests --bin fuzz-protocol -- --inputs 10000000`;
 //! the tests run a short version.
-use phototraverse_core::camera::{Interior, Rig};
 use phototraverse_core::protocol::crc::crc32;
 use phototraverse_core::protocol::messages::*;
+use phototraverse_core::protocol::samples::sample_messages;
 use phototraverse_core::protocol::{
     cobs, Decoder, Endpoint, EndpointBuffers, EndpointConfig, Event, MAX_ENCODED, MAX_PACKET,
-    MAX_PAYLOAD as MAX_PAYLOAD_BYTES, PROTOCOL_VERSION,
+    PROTOCOL_VERSION,
 };
 
 /// What a run did.
@@ -66,88 +66,6 @@ impl Rng {
     pub fn below(&mut self, n: usize) -> usize {
         (self.next_u64() % n.max(1) as u64) as usize
     }
-}
-
-/// One valid message of every type (the chunk's data borrowed from `data`).
-pub fn sample_messages(data: &[u8]) -> Vec<Message<'_>> {
-    let rig = Rig::rectified(Interior::pinhole_px(640, 480, 700.0), 0.54);
-    let mut points = Points::new(41, 3);
-    points.flags = points_flags::MORE;
-    points.push_point(
-        PointRecord {
-            track: 100,
-            xyz: [1.5, 20.25, -1.125],
-            std: [0.01, 0.25, 0.02],
-        },
-        MAX_PAYLOAD_BYTES,
-    );
-    points.push_observation(
-        PointObservation {
-            track: 100,
-            epoch: 40,
-            camera: 1,
-            flags: PointObservation::FLAGGED,
-            col: 310.5,
-            row: 12.25,
-            residual_px: [0.125, -0.5],
-        },
-        MAX_PAYLOAD_BYTES,
-    );
-    vec![
-        Message::Hello(Hello {
-            session: 0xDEAD_BEEF,
-            host_version: [0, 1, 2],
-        }),
-        Message::Configure(Configure {
-            version: CONFIG_VERSION,
-            rig,
-            pipeline: Pipeline::default(),
-            traverse: TraverseSettings::default(),
-        }),
-        Message::FrameBegin(FrameBegin {
-            epoch: 3,
-            camera: Camera::Right,
-            format: PixelFormat::Gray16 { bits: 12 },
-            width: 640,
-            height: 480,
-            timestamp_us: 123_456,
-        }),
-        Message::FrameChunk(FrameChunk {
-            epoch: 3,
-            camera: Camera::Left,
-            offset: 1024,
-            data,
-        }),
-        Message::FrameEnd(FrameEnd {
-            epoch: 3,
-            camera: Camera::Left,
-            total_bytes: 2048,
-            crc32: 0x1234_5678,
-        }),
-        Message::Result(EpochResult::empty(4, EpochStatus::Flagged)),
-        Message::Error(ErrorMsg {
-            code: ErrorCode::ChunkOutOfOrder,
-            epoch: 7,
-            seq: 99,
-            text: "chunk at 10, expected 0",
-        }),
-        Message::Ack(Ack {
-            next_expected: 65535,
-            window: 32,
-            sack: 0x8000_0000_0000_0005,
-            received: 9,
-            damaged: 1,
-            probe: 2,
-            answers: 0,
-        }),
-        Message::Nack(Nack {
-            expected: 3,
-            reason: nack_reason::TIMEOUT,
-        }),
-        Message::Reset(Reset { reason: 1 }),
-        Message::Points(points),
-        Message::PointsRequest(PointsRequest { flush: 1 }),
-    ]
 }
 
 /// Payloads of the sample messages with their type bytes.

@@ -450,7 +450,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Outbound<B> {
             }
         }
         let damage = self.damage_rate();
-        let (why, seq, _) = self.window.next_transmission(now)?;
+        let (why, seq) = self.window.next_transmission(now)?;
         if why == Transmission::Lost {
             self.sent.resent_lost += 1;
             self.counters.retransmissions += 1;

@@ -18,6 +18,8 @@ pub mod decoder;
 pub mod endpoint;
 pub mod messages;
 pub mod packet;
+#[cfg(any(test, feature = "samples"))]
+pub mod samples;
 pub mod window;
 
 #[cfg(test)]

@@ -301,7 +301,8 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
     /// new ones. Records the transmission. A time-out resends only the oldest
     /// packet, with a probe (see [`TxWindow::timer_expired`]); the answer says
     /// what else is lost, so a receiver that was only busy costs one packet.
-    pub fn next_transmission(&mut self, now: u64) -> Option<(Transmission, u16, &[u8])> {
+    /// Returns why it goes and its sequence number ([`TxWindow::packet`] gives its bytes).
+    pub fn next_transmission(&mut self, now: u64) -> Option<(Transmission, u16)> {
         let mut pick = None;
         for k in 0..self.count {
             let s = &self.state[self.slot_at(k)];
@@ -318,23 +319,22 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
             }
         }
         let (k, why) = pick?;
+        Some((why, self.record(k, now, why != Transmission::New)))
+    }
+
+    /// Records a transmission of the packet `k` places after the oldest at
+    /// `now`; returns its sequence number.
+    fn record(&mut self, k: usize, now: u64, again: bool) -> u16 {
         if self.timer.is_none() {
             self.timer = Some(now);
         }
-        let i = self.slot_at(k);
-        let s = &mut self.state[i];
-        s.retransmitted |= why != Transmission::New;
+        let s = &mut self.state[self.slot_at(k)];
+        s.retransmitted |= again;
         s.sent_at = Some(now);
         s.lost = false;
         s.order = self.transmissions;
         self.transmissions = self.transmissions.wrapping_add(1);
-        let start = i * self.slot_len;
-        let seq = self.base.wrapping_add(k as u16);
-        Some((
-            why,
-            seq,
-            &self.storage.as_ref()[start..start + s.len as usize],
-        ))
+        self.base.wrapping_add(k as u16)
     }
 
     /// Records a resend of the oldest packet in flight (a time-out's probe
@@ -345,14 +345,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
             let s = &self.state[self.slot_at(k)];
             s.sent_at.is_some() && !s.sacked
         })?;
-        let i = self.slot_at(k);
-        let s = &mut self.state[i];
-        s.retransmitted = true;
-        s.sent_at = Some(now);
-        s.lost = false;
-        s.order = self.transmissions;
-        self.transmissions = self.transmissions.wrapping_add(1);
-        Some(self.base.wrapping_add(k as u16))
+        Some(self.record(k, now, true))
     }
 
     /// The encoded bytes of the held packet `seq`, if it is still held.

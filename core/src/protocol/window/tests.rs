@@ -21,8 +21,8 @@ fn sent(storage: &mut [u8; 64], n: usize) -> TxWindow<&mut [u8]> {
 /// Transmits everything due at `now`; returns the first bytes of what went out.
 fn send_all(w: &mut TxWindow<&mut [u8]>, now: u64) -> heapless::Vec<u8, 64> {
     let mut out = heapless::Vec::new();
-    while let Some((_, _, p)) = w.next_transmission(now) {
-        out.push(p[0]).unwrap();
+    while let Some((_, seq)) = w.next_transmission(now) {
+        out.push(w.packet(seq).unwrap()[0]).unwrap();
     }
     out
 }
