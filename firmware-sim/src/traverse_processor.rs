@@ -125,8 +125,7 @@ pub fn epoch_result(epoch: u32, out: &traverse::EpochOutput) -> EpochResult {
             window_points: out.points,
             observations: out.observations,
             new_points: out.new_points,
-            // The traverse says that something was dropped, not how much.
-            dropped: (out.flags & flags::CAPACITY != 0) as u32,
+            dropped: out.dropped,
         },
         figures,
         rig: None,
@@ -537,6 +536,7 @@ mod tests {
             new_points: 12,
             observations: 1000,
             points: 250,
+            dropped: 1,
             rms_px: 0.4,
             ..Default::default()
         };

@@ -601,6 +601,7 @@ impl<'a> Traverse<'a> {
         t_start: u64,
     ) -> bool {
         let first = self.window.n_epochs() == 0 && self.history[1].is_none();
+        let dropped_before = self.window.dropped();
         let mut resected = if first { None } else { self.resect() };
         if !first && resected.is_none() {
             resected = self.relocalize();
@@ -659,8 +660,10 @@ impl<'a> Traverse<'a> {
         let adjusted = first || self.solve(id, prediction, out);
         out.times.adjust_us = elapsed(t3, clock.now_us());
         self.prev_window_epoch = Some(id);
+        // The window counts its refusals since the start: this epoch's are the increase.
         let (dp, dobs) = self.window.dropped();
-        if dp + dobs > 0 {
+        out.dropped = (dp + dobs - dropped_before.0 - dropped_before.1) as u32;
+        if out.dropped > 0 {
             out.flags |= flags::CAPACITY;
         }
         out.observations = self.window.observations().len() as u32;

@@ -115,6 +115,8 @@ pub struct EpochOutput {
     pub points: u32,
     /// Observations flagged as blunders in the last adjustment.
     pub flagged_observations: u32,
+    /// Points and observations the window refused at this epoch, its capacity full.
+    pub dropped: u32,
     /// RMS image residual of the window, pixels.
     pub rms_px: f64,
     pub iterations: u32,

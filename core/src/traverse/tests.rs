@@ -339,3 +339,27 @@ fn tie_points_found_by_area_matching_keep_an_epoch_from_being_lost() {
     // Measured: epochs 2 to 6 carried (9 to 12 descriptor ties, 14 to 19 in all).
     assert!(carried >= 3, "{carried} epochs carried by area tie points");
 }
+
+#[test]
+fn a_full_window_counts_what_each_epoch_dropped() {
+    let mut cfg = config();
+    // Room for fewer points than the scene offers: the window refuses some.
+    cfg.adjust.max_points = 60;
+    let (mut st, _) = storage(&cfg);
+    let mut arena = Arena::new(&mut st.0);
+    let mut t = Traverse::new(cfg, &mut arena).unwrap();
+    let rig = rig();
+    let mut sum = 0;
+    for k in 0..6 {
+        let out = process_view(&mut t, &rig, &truth(k), k as f64);
+        assert_eq!(
+            out.flags & flags::CAPACITY != 0,
+            out.dropped > 0,
+            "epoch {k}: the flag says this epoch dropped something ({out:?})"
+        );
+        sum += out.dropped as usize;
+    }
+    let (points, observations) = t.window.dropped();
+    assert!(sum > 0, "the capacity was reached");
+    assert_eq!(sum, points + observations, "the epochs' counts add up");
+}
