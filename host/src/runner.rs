@@ -8,14 +8,15 @@
 //! `poses.txt` is written line by line as results arrive, so whatever stops a
 //! run (a corrupt image is skipped, a dead firmware ends it) leaves the poses of
 //! the epochs processed so far on disk.
-use crate::dataset::Dataset;
+use crate::dataset::{aiding, Dataset};
 use crate::eval::{evaluate, Evaluation};
 use crate::link::LinkOptions;
 use crate::pipeline::PipelineSettings;
 use crate::poses::{format_pose, KittiPose};
 use crate::report::{
-    efoto_image_index, write_efoto, write_eop_csv, write_html, write_ply, CameraEop, EpochChi2,
-    EpochRecord, EpochStatus, MemoryLine, QualitySummary, RigReport, RunReport, TieCollector,
+    efoto_image_index, velocities, write_efoto, write_eop_csv, write_html, write_ply, CameraEop,
+    EpochChi2, EpochRecord, EpochStatus, GnssRecord, MemoryLine, QualitySummary, RigReport,
+    RunReport, TieCollector,
 };
 use crate::session::{EpochFrames, Session, SessionOptions};
 use anyhow::{Context, Result};
@@ -23,7 +24,7 @@ use phototraverse_core::adjust::quality::ChiSquareTest;
 use phototraverse_core::budget::{ComponentKind, MemoryBudget};
 use phototraverse_core::camera::{kitti_from_pose, pose_from_kitti, Pose, Rig};
 use phototraverse_core::protocol::messages::{
-    self, stage, ConfigAccepted, EpochResult, ResultFlags,
+    self, stage, Aux, ConfigAccepted, EpochResult, ResultFlags, AUX_GNSS, AUX_ODOMETER,
 };
 use phototraverse_core::traverse::motion::constant_velocity;
 use phototraverse_firmware_sim::{configuration_budget, TraverseFactory};
@@ -183,6 +184,28 @@ impl<'d> Run<'d> {
         self.ds.epochs[i].time.unwrap_or(i as f64)
     }
 
+    /// The GNSS fix and the odometer leg from the previous epoch of epoch `i`, when the
+    /// dataset has them ([`aiding`]).
+    fn aux_of(&self, i: usize, time: f64) -> Option<Aux> {
+        let gnss = aiding::gnss_at(&self.ds.gnss, time);
+        let odometer = i
+            .checked_sub(1)
+            .and_then(|p| aiding::odometer_between(&self.ds.odometer, self.time_of(p), time));
+        if gnss.is_none() && odometer.is_none() {
+            return None;
+        }
+        let (odometer_m, odometer_sigma_m) = odometer.unwrap_or_default();
+        let (gnss_m, sigma) = gnss.unwrap_or_default();
+        Some(Aux {
+            epoch: i as u32,
+            flags: gnss.map_or(0, |_| AUX_GNSS) | odometer.map_or(0, |_| AUX_ODOMETER),
+            odometer_m,
+            odometer_sigma_m,
+            gnss_m,
+            gnss_sigma_m: [sigma; 3],
+        })
+    }
+
     /// Sends epoch `i`, waits for its result and records it.
     fn epoch<T: crate::link::Transport>(
         &mut self,
@@ -193,7 +216,9 @@ impl<'d> Run<'d> {
         let record = match self.ds.load_pair(i) {
             Ok((left, right)) => {
                 let timestamp_us = (time * 1e6).max(0.0) as u64;
-                let frames = EpochFrames::gray8(i as u32, timestamp_us, &left, &right);
+                let mut frames = EpochFrames::gray8(i as u32, timestamp_us, &left, &right);
+                let aux = self.aux_of(i, time);
+                frames.aux = aux;
                 session.send_epoch(&frames)?;
                 let e = i as u32;
                 // Statistics follow the result of every epoch the firmware processed.
@@ -215,6 +240,7 @@ impl<'d> Run<'d> {
                 let mut rec = self.record(i, time, &result, session.stats(e).map(|s| s.timings_us));
                 // Host-side round trips of the tie point report (firmware work and link).
                 rec.stage_ms.insert("points_report".into(), report_ms);
+                note_aux(&mut rec, aux);
                 rec
             }
             Err(err) => {
@@ -268,6 +294,9 @@ impl<'d> Run<'d> {
             keypoints: [0; 2],
             stereo_matches: 0,
             stage_ms: Default::default(),
+            gnss: None,
+            odometer_m: None,
+            velocity: None,
         }
     }
 
@@ -320,6 +349,9 @@ impl<'d> Run<'d> {
             keypoints: r.counts.keypoints,
             stereo_matches: r.counts.stereo_matches,
             stage_ms,
+            gnss: None,
+            odometer_m: None,
+            velocity: None,
         }
     }
 
@@ -413,6 +445,9 @@ impl<'d> Run<'d> {
             .and_then(|l| session.stats(l as u32))
             .map(|s| s.memory_high_water);
         self.report.memory = self.memory_lines(high_water);
+        for (e, v) in velocities(&self.report.epochs).into_iter().enumerate() {
+            self.report.epochs[e].velocity = v;
+        }
         self.report.quality = self.quality();
         let mut evaluation = None;
         if let Some(gt) = &self.ds.ground_truth {
@@ -450,6 +485,22 @@ impl<'d> Run<'d> {
             evaluation,
             unreadable: self.unreadable,
         })
+    }
+}
+
+/// What the epoch's Aux carried, with the adjusted position's residual to the fix.
+fn note_aux(rec: &mut EpochRecord, aux: Option<Aux>) {
+    let Some(a) = aux else { return };
+    if a.flags & AUX_GNSS != 0 {
+        let l = &rec.left;
+        rec.gnss = Some(GnssRecord {
+            position: a.gnss_m,
+            sigma_m: a.gnss_sigma_m[0],
+            residual_m: [l.x - a.gnss_m[0], l.y - a.gnss_m[1], l.z - a.gnss_m[2]],
+        });
+    }
+    if a.flags & AUX_ODOMETER != 0 {
+        rec.odometer_m = Some(a.odometer_m);
     }
 }
 

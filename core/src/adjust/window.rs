@@ -405,6 +405,8 @@ struct FixedSlot {
     right: [f64; 9],
     /// Time of the epoch, seconds (the motion smoothness across the window's edge).
     time: f64,
+    /// Covariance of `params` with respect to the datum ([`Window::epoch_absolute_covariance`]).
+    cov: [f64; 36],
 }
 
 /// Where an observation's epoch is: a window slot (adjusted) or a fixed slot.
@@ -480,6 +482,8 @@ pub struct Window<'a> {
     /// Cofactor matrix `Q` of the rig at the last solution (valid when `rig_cov_valid`).
     rig_cov: [f64; 36],
     rig_cov_valid: bool,
+    /// sigma0^2 of the solution the epochs' covariances come from (they are `s02 Q`).
+    cov_s02: f64,
     rig_rot: Rotations,
     /// Interior orientation corrections (self-calibration), their prior and
     /// information, carried across slides like the rig's.
@@ -677,6 +681,7 @@ impl<'a> Window<'a> {
             rig_std: [0.0; 6],
             rig_cov: [0.0; 36],
             rig_cov_valid: false,
+            cov_s02: 1.0,
             rig_rot: Rotations::new(r.angles[0], r.angles[1], r.angles[2]),
             interior: [0.0; 6],
             interior_prior: [0.0; 6],
@@ -1005,6 +1010,55 @@ impl<'a> Window<'a> {
         Some(s)
     }
 
+    /// 6x6 covariance of slot `i` with respect to the datum (row-major, sigma0^2
+    /// scaled). The window's own covariance ([`Self::epoch_covariance`]) holds the
+    /// fixed epochs exact, so it is the precision relative to the poses that left; the
+    /// newest fixed epoch's absolute covariance, carried rigidly to the epoch (its
+    /// rotation error turns the epoch's offset from it), adds what they were uncertain
+    /// by. Each fixed epoch keeps the absolute covariance it left with, so the
+    /// uncertainty of a traverse without fixes accumulates step by step, as it should.
+    pub fn epoch_absolute_covariance(&self, i: usize) -> Option<[f64; 36]> {
+        let mut cov = self.epoch_covariance(i)?;
+        let Some(anchor) = self.n_fixed.checked_sub(1).map(|a| &self.fixed[a]) else {
+            return Some(cov);
+        };
+        let j = rigid_transport(&anchor.params, &self.epochs[i].params);
+        // cov += J C_a J^T
+        let mut jc = [0.0; 36];
+        for r in 0..6 {
+            for c in 0..6 {
+                jc[r * 6 + c] = (0..6).map(|k| j[r * 6 + k] * anchor.cov[k * 6 + c]).sum();
+            }
+        }
+        for r in 0..6 {
+            for c in 0..6 {
+                cov[r * 6 + c] += (0..6).map(|k| jc[r * 6 + k] * j[c * 6 + k]).sum::<f64>();
+            }
+        }
+        Some(cov)
+    }
+
+    /// The absolute covariance a leaving (oldest) epoch keeps as a fixed epoch, at no
+    /// less than its a-priori value (sigma0 = 1): the a-posteriori scale comes from
+    /// residuals that do not see the errors a traverse accumulates, which are correlated
+    /// from epoch to epoch (the same points on the same surfaces), so below 1 it would
+    /// make the accumulated precision optimistic.
+    fn leaving_covariance(&self) -> Option<[f64; 36]> {
+        let mut cov = self.epoch_absolute_covariance(0)?;
+        if self.cov_s02 > 0.0 && self.cov_s02 < 1.0 {
+            let k = 1.0 / self.cov_s02;
+            cov.iter_mut().for_each(|v| *v *= k);
+        }
+        Some(cov)
+    }
+
+    /// Standard deviations of slot `i` with respect to the datum (omega, phi, kappa
+    /// rad; X, Y, Z m): [`Self::epoch_absolute_covariance`].
+    pub fn epoch_absolute_std(&self, i: usize) -> Option<[f64; 6]> {
+        let c = self.epoch_absolute_covariance(i)?;
+        Some(core::array::from_fn(|k| libm::sqrt(c[k * 6 + k].max(0.0))))
+    }
+
     /// 6x6 covariance (row-major) of slot `i` from the last solution (sigma0^2 scaled).
     pub fn epoch_covariance(&self, i: usize) -> Option<[f64; 36]> {
         (i < self.n_epochs && self.epochs[i].flags & EP_COV != 0).then(|| self.epochs[i].cov)
@@ -1166,7 +1220,13 @@ impl<'a> Window<'a> {
         }
         let dropped = self.epoch_pose(0).ok_or(AdjustError::TooFewEpochs)?;
         let gone = self.epochs[0].id;
-        let cap = self.cfg.fixed_epochs;
+        // A GNSS fix, not the poses of the past held exact, anchors an aided window:
+        // an epoch with a fix leaves without becoming a fixed epoch and releases those
+        // there are, or the window could not follow the fixes (it would carry the
+        // past's drift forward, the fixes pulling at it only by their weight).
+        let aided = self.epochs[0].flags & EP_GNSS != 0;
+        let had_fixed = self.n_fixed > 0;
+        let cap = if aided { 0 } else { self.cfg.fixed_epochs };
         let expired = if cap == 0 {
             Some(gone)
         } else {
@@ -1177,6 +1237,7 @@ impl<'a> Window<'a> {
                 rot,
                 right: right_rotation(&rot, &self.rig_rot),
                 time: e.time,
+                cov: self.leaving_covariance().unwrap_or([0.0; 36]),
             };
             let expired = (self.n_fixed == cap).then(|| gone.wrapping_sub(cap as u32));
             if self.n_fixed == cap {
@@ -1187,6 +1248,7 @@ impl<'a> Window<'a> {
             self.n_fixed += 1;
             expired
         };
+        let release = aided && had_fixed;
         // Observations in the window per point, after this slide (point_start is
         // scratch until the next build_index).
         let np = self.n_point_slots;
@@ -1199,7 +1261,9 @@ impl<'a> Window<'a> {
         let mut k = 0;
         for i in 0..self.n_obs {
             let o = self.obs[i];
-            let keep = Some(o.epoch) != expired && self.point_start[o.point as usize] > 0;
+            let released = release && self.slot_of(o.epoch).is_none();
+            let keep =
+                Some(o.epoch) != expired && !released && self.point_start[o.point as usize] > 0;
             if keep {
                 self.obs[k] = o;
                 k += 1;
@@ -1213,15 +1277,31 @@ impl<'a> Window<'a> {
         }
         self.n_obs = k;
         self.indexed = None;
+        if release {
+            self.n_fixed = 0;
+        }
         // Prior of the new first epoch from its marginal covariance.
+        let s02 = self.cov_s02;
         let next = &mut self.epochs[1];
         let mut info = [0.0; 36];
         let have = next.flags & EP_COV != 0 && invert6(&next.cov, &mut info);
-        // Without fixed epochs the prior is the window's only link to the epochs that
-        // left: it stays at full strength.
-        if have && self.cfg.fixed_epochs > 0 {
+        if have && self.cfg.fixed_epochs > 0 && (had_fixed || !aided) {
+            // The marginal holds the fixed epochs' observations, which stay (or, when
+            // released, held the past exact): weakened.
             let k = 1.0 / self.cfg.carried_prior_inflation;
             info.iter_mut().for_each(|v| *v *= k);
+        } else if have && aided {
+            // The prior is now the window's only link to the epochs that left, at full
+            // strength, in the a-priori units of the fixes' weights (the covariance is
+            // s02 Q). The epoch's own fix stays in the window: its information, which
+            // the marginal holds exactly, is taken out so it does not count twice.
+            info.iter_mut().for_each(|v| *v *= s02);
+            if next.flags & EP_GNSS != 0 {
+                let w = 1.0 / (next.gnss_sigma * next.gnss_sigma);
+                for a in 3..6 {
+                    info[a * 6 + a] = (info[a * 6 + a] - w).max(0.0);
+                }
+            }
         }
         if !have {
             let s = self.cfg.sigmas;
@@ -2455,6 +2535,7 @@ impl<'a> Window<'a> {
     /// and the points' standard deviations.
     fn quality(&mut self, report: &mut Report) -> Result<(), AdjustError> {
         let s02 = self.global_test(report)?;
+        self.cov_s02 = s02;
         let nc = self.n_cam();
         let rig_block = self.rig_block();
         // Undamped reduced matrix, inverted in place: Q_cc.
@@ -2703,6 +2784,44 @@ fn carry_prior(
 }
 
 /// Inverts a symmetric positive definite 6x6 (row-major); false when not SPD.
+/// Jacobian (6x6, row-major) of the pose `to` with respect to the pose `from` when both
+/// move as one rigid body with `from`: a small rotation `d` (object frame) of `from`
+/// turns `to` by the same `d` and moves its centre by `d x (C_to - C_from)`. In the
+/// parameters (omega, phi, kappa, X, Y, Z): angles `E_to^-1 E_from`, centre
+/// `-[C_to - C_from]x E_from` and the identity, with `E` the angles' rotation vector.
+fn rigid_transport(from: &[f64; 6], to: &[f64; 6]) -> [f64; 36] {
+    let e_from = angle_rates(from);
+    let e_to_inv = angle_rates(to)
+        .try_inverse()
+        .unwrap_or_else(Matrix3::identity);
+    let a = e_to_inv * e_from;
+    let d = Vector3::new(to[3] - from[3], to[4] - from[4], to[5] - from[5]);
+    let lever = -d.cross_matrix() * e_from;
+    let mut j = [0.0; 36];
+    for r in 0..3 {
+        for c in 0..3 {
+            j[r * 6 + c] = a[(r, c)];
+            j[(r + 3) * 6 + c] = lever[(r, c)];
+        }
+        j[(r + 3) * 6 + r + 3] = 1.0;
+    }
+    j
+}
+
+/// `E` of the angles in `p`: column `i` is the object-frame rotation vector of a unit
+/// change of angle `i` (`dR R^T = [E da]x`, `R = M^T` camera to object).
+fn angle_rates(p: &[f64; 6]) -> Matrix3<f64> {
+    let (m, d) = crate::camera::rotation_with_derivatives(p[0], p[1], p[2]);
+    let mut e = Matrix3::zeros();
+    for (i, di) in d.iter().enumerate() {
+        let s = di.transpose() * m;
+        e[(0, i)] = s[(2, 1)];
+        e[(1, i)] = s[(0, 2)];
+        e[(2, i)] = s[(1, 0)];
+    }
+    e
+}
+
 fn invert6(a: &[f64; 36], out: &mut [f64; 36]) -> bool {
     let mut m = *a;
     if cholesky::factor(&mut m, 6, cholesky::PIVOT_REL_TOL).is_err() {
@@ -2944,5 +3063,52 @@ mod tests {
         w.step(0.0).unwrap();
         let after = grad_norm(&mut w);
         assert!(after < 1e-3 * before, "gradient {before} -> {after}");
+    }
+
+    /// The rigid transport against moving both poses numerically: a small rotation
+    /// about the first pose's centre (object frame) and a shift.
+    #[test]
+    fn rigid_transport_matches_a_rigid_motion_of_both_poses() {
+        use crate::camera::{angles_from_rotation, rotation};
+        let from = [1.62, 0.05, -0.1, 1.0, 2.0, 3.0];
+        let to = [1.5, -0.02, 0.3, 5.0, 20.0, 1.0];
+        let j = rigid_transport(&from, &to);
+        let e_from = angle_rates(&from);
+        let h = 1e-6;
+        for axis in 0..6 {
+            // The motion: a rotation vector (object frame) or a shift, size h.
+            let mut d = Vector3::zeros();
+            let mut shift = Vector3::zeros();
+            if axis < 3 {
+                d[axis] = h;
+            } else {
+                shift[axis - 3] = h;
+            }
+            let turn = nalgebra::Rotation3::new(d).into_inner();
+            let moved = |p: &[f64; 6]| {
+                let r = rotation(p[0], p[1], p[2]).transpose();
+                let c = Vector3::new(p[3], p[4], p[5]) - Vector3::new(from[3], from[4], from[5]);
+                let m = (turn * r).transpose();
+                let a = angles_from_rotation(&m);
+                let c = turn * c + Vector3::new(from[3], from[4], from[5]) + shift;
+                [a[0], a[1], a[2], c[0], c[1], c[2]]
+            };
+            let (f2, t2) = (moved(&from), moved(&to));
+            let df: [f64; 6] = core::array::from_fn(|k| f2[k] - from[k]);
+            let dt: [f64; 6] = core::array::from_fn(|k| t2[k] - to[k]);
+            // The angles' change of `from` is the rotation vector through E.
+            let da = e_from.try_inverse().unwrap() * d;
+            for k in 0..3 {
+                assert!((df[k] - da[k]).abs() < 1e-9, "axis {axis}: E");
+            }
+            for r in 0..6 {
+                let predicted: f64 = (0..6).map(|k| j[r * 6 + k] * df[k]).sum();
+                assert!(
+                    (predicted - dt[r]).abs() < 1e-3 * h,
+                    "axis {axis}, row {r}: {predicted} against {}",
+                    dt[r]
+                );
+            }
+        }
     }
 }

@@ -265,7 +265,7 @@ impl<'a> Traverse<'a> {
             Some((
                 self.window_inputs[i],
                 self.window.epoch_pose(i)?,
-                self.window.epoch_std(i),
+                self.window.epoch_absolute_std(i),
             ))
         })
     }
@@ -879,7 +879,7 @@ impl<'a> Traverse<'a> {
             out.left = pose;
             out.right = self.right_of(&pose);
         }
-        out.std = self.window.epoch_std(last);
+        out.std = self.window.epoch_absolute_std(last);
         out.sigma0 = rep.sigma0;
         out.chi2_passed = rep.chi2.passed;
         out.redundancy = rep.redundancy as u32;

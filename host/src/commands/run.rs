@@ -1,5 +1,5 @@
 //! `phototraverse run DATASET --out DIR`: orient every image of a stereo sequence.
-use crate::dataset::Dataset;
+use crate::dataset::{aiding, Dataset};
 use crate::link::LinkOptions;
 use crate::pipeline::{Mode, PipelineSettings};
 use crate::runner::{run_dataset, RunOptions, RunOutcome};
@@ -32,13 +32,72 @@ pub struct Args {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// GNSS fixes (`time_s X_m Y_m Z_m sigma_m` per line; default: the dataset's gnss.txt).
+    #[arg(long, value_name = "FILE")]
+    pub gnss: Option<PathBuf>,
+    /// Odometer distances (`time_s distance_m sigma_m` per line; default: the dataset's
+    /// odometer.txt).
+    #[arg(long, value_name = "FILE")]
+    pub odometer: Option<PathBuf>,
+    /// Withhold the GNSS fixes of a time span, seconds (repeatable): an outage simulated
+    /// on a dataset with GNSS throughout.
+    #[arg(long, value_name = "START_S..END_S", value_parser = aiding::parse_span)]
+    pub gnss_outage: Vec<(f64, f64)>,
+    /// Orient from the images alone: ignore GNSS and odometer.
+    #[arg(long, conflicts_with_all = ["gnss", "odometer", "gnss_outage"])]
+    pub images_only: bool,
     #[command(flatten)]
     pub link: LinkOptions,
 }
 
+/// Replaces, withholds or drops the dataset's aiding observations as the options say,
+/// and tells what the run will use.
+fn apply_aiding(ds: &mut Dataset, args: &Args) -> Result<()> {
+    if args.images_only {
+        ds.gnss.clear();
+        ds.odometer.clear();
+        return Ok(());
+    }
+    if let Some(p) = &args.gnss {
+        ds.gnss = aiding::read_gnss(p)?;
+    }
+    if let Some(p) = &args.odometer {
+        ds.odometer = aiding::read_odometer(p)?;
+    }
+    let all = ds.gnss.len();
+    ds.gnss = aiding::withhold(&ds.gnss, &args.gnss_outage);
+    let span = ds.epochs.first().zip(ds.epochs.last());
+    let (t0, t1) = span.map_or((0.0, 0.0), |(a, b)| {
+        (
+            a.time.unwrap_or(0.0),
+            b.time.unwrap_or((ds.len() - 1) as f64),
+        )
+    });
+    let outside = ds
+        .gnss
+        .iter()
+        .filter(|f| {
+            f.time < t0 - aiding::GNSS_SAME_TIME_S || f.time > t1 + aiding::GNSS_SAME_TIME_S
+        })
+        .count();
+    if all > 0 {
+        eprintln!(
+            "GNSS: {} fixes, {} withheld by --gnss-outage, {outside} outside the sequence's \
+             {t0}..{t1} s (ignored)",
+            all,
+            all - ds.gnss.len()
+        );
+    }
+    if !ds.odometer.is_empty() {
+        eprintln!("odometer: {} readings", ds.odometer.len());
+    }
+    Ok(())
+}
+
 pub fn run(args: Args) -> Result<()> {
-    let ds = Dataset::open(&args.dataset)
+    let mut ds = Dataset::open(&args.dataset)
         .with_context(|| format!("cannot open the dataset {}", args.dataset.display()))?;
+    apply_aiding(&mut ds, &args)?;
     let mut settings = PipelineSettings::load(args.config.as_deref())?;
     if let Some(m) = args.mode {
         settings.mode = m;

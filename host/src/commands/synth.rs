@@ -1,5 +1,7 @@
 //! `phototraverse synth --scene NAME --out DIR`: renders a synthetic street
 //! sequence with ground truth (see [`crate::synth`] and docs/datasets.md).
+use crate::dataset::aiding;
+use crate::synth::aiding::AidingOptions;
 use crate::synth::realism::{CalibError, Imperfections};
 use crate::synth::{generate, LayoutChoice, SynthOptions, SCENES};
 use std::io::IsTerminal;
@@ -57,6 +59,20 @@ pub struct Args {
     /// Typical sensor: `--realistic` = blur 0.6, vignetting 0.25, flicker 0.05, noise 1.5, JPEG 90, calib base=0.003,focal=0.003,pp_px=1,rel_deg=0.05.
     #[arg(long)]
     pub realistic: bool,
+    /// Write gnss.txt: simulated GNSS fixes of the left perspective centre with this
+    /// sigma per coordinate, metres (e.g. 0.02).
+    #[arg(long, value_name = "SIGMA_M")]
+    pub gnss: Option<f64>,
+    /// GNSS fixes per second (default: one at every epoch).
+    #[arg(long, value_name = "HZ", requires = "gnss")]
+    pub gnss_rate: Option<f64>,
+    /// No GNSS fixes in this time span, seconds (repeatable).
+    #[arg(long, value_name = "START_S..END_S", value_parser = aiding::parse_span, requires = "gnss")]
+    pub gnss_outage: Vec<(f64, f64)>,
+    /// Write odometer.txt: the distance between epochs with this relative sigma
+    /// (0.005 = 0.5 %).
+    #[arg(long, value_name = "SIGMA")]
+    pub odometer: Option<f64>,
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
@@ -98,6 +114,18 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             };
         }
     }
+    let positive = |v: Option<f64>, name: &str| match v {
+        Some(x) if !(x > 0.0 && x.is_finite()) => {
+            Err(anyhow::anyhow!("--{name} {x}: must be a positive number"))
+        }
+        _ => Ok(v),
+    };
+    opts.aiding = AidingOptions {
+        gnss_sigma_m: positive(a.gnss, "gnss")?,
+        gnss_rate_hz: positive(a.gnss_rate, "gnss-rate")?,
+        gnss_outages: a.gnss_outage.clone(),
+        odometer_sigma: positive(a.odometer, "odometer")?,
+    };
     let s = generate(&opts)?;
     println!(
         "synth {}: {} epochs ({}x{}, {} layout, {:.1} m) written to {}",

@@ -59,6 +59,13 @@ pub enum DatasetError {
         line: usize,
         problem: String,
     },
+    /// A line of `gnss.txt` or `odometer.txt`.
+    #[error("{path}: line {line}: {problem}")]
+    AidingLine {
+        path: PathBuf,
+        line: usize,
+        problem: String,
+    },
     #[error("{path}: {found} lines for {expected} epochs")]
     CountMismatch {
         path: PathBuf,

@@ -5,6 +5,7 @@
 //! and right images epoch by epoch and checks every image header, so a
 //! malformed dataset fails at once with an error naming the file and the
 //! problem rather than in the middle of a run.
+pub mod aiding;
 mod error;
 mod image;
 pub mod kitti;
@@ -66,6 +67,10 @@ pub struct Dataset {
     pub epochs: Vec<Epoch>,
     /// Ground truth (`gt_poses.txt`), one pose per epoch.
     pub ground_truth: Option<Vec<KittiPose>>,
+    /// GNSS fixes (`gnss.txt`), in time order; empty without the file.
+    pub gnss: Vec<aiding::GnssFix>,
+    /// Odometer readings (`odometer.txt`), in time order; empty without the file.
+    pub odometer: Vec<aiding::OdometerReading>,
 }
 
 impl Dataset {
@@ -162,6 +167,15 @@ impl Dataset {
         } else {
             None
         };
+        let optional = |name: &str| Some(dir.join(name)).filter(|p| p.is_file());
+        let gnss = match optional(aiding::GNSS_FILE) {
+            Some(p) => aiding::read_gnss(&p)?,
+            None => Vec::new(),
+        };
+        let odometer = match optional(aiding::ODOMETER_FILE) {
+            Some(p) => aiding::read_odometer(&p)?,
+            None => Vec::new(),
+        };
         let epochs = pairs
             .into_iter()
             .enumerate()
@@ -180,6 +194,8 @@ impl Dataset {
             precision: file.precision,
             epochs,
             ground_truth,
+            gnss,
+            odometer,
         })
     }
 

@@ -15,20 +15,35 @@ fn fmt_opt(v: Option<f64>) -> String {
 }
 
 /// `eop.csv`: one row per image (epoch, camera), angles in degrees, positions in metres,
-/// standard deviations, sigma0, observation and tie-point counts, status.
+/// standard deviations, sigma0, observation and tie-point counts, status, and on the
+/// left camera's rows the epoch time and the velocity with the speed's standard deviation.
 pub fn write_eop_csv(path: &Path, report: &RunReport) -> Result<()> {
     let mut w = create(path)?;
     writeln!(
         w,
         "epoch,camera,omega_deg,phi_deg,kappa_deg,X_m,Y_m,Z_m,\
          sd_omega_deg,sd_phi_deg,sd_kappa_deg,sd_X_m,sd_Y_m,sd_Z_m,\
-         sigma0,observations,tie_points,status"
+         sigma0,observations,tie_points,status,\
+         time_s,vX_m_s,vY_m_s,vZ_m_s,speed_m_s,sd_speed_m_s"
     )?;
     for e in &report.epochs {
         for (camera, eop) in [("left", &e.left), ("right", &e.right)] {
+            let motion = match (camera, &e.velocity) {
+                ("left", Some(v)) => format!(
+                    "{},{:.5},{:.5},{:.5},{:.5},{}",
+                    fmt_opt(e.time),
+                    v.v_m_s[0],
+                    v.v_m_s[1],
+                    v.v_m_s[2],
+                    v.speed_m_s,
+                    fmt_opt(v.sd_speed_m_s)
+                ),
+                ("left", None) => format!("{},,,,,", fmt_opt(e.time)),
+                _ => ",,,,,".to_string(),
+            };
             writeln!(
                 w,
-                "{},{},{},{},{},{},{}",
+                "{},{},{},{},{},{},{},{motion}",
                 e.epoch,
                 camera,
                 eop_fields(eop),
@@ -170,6 +185,9 @@ mod tests {
             keypoints: [1000, 990],
             stereo_matches: 500,
             stage_ms: Default::default(),
+            gnss: None,
+            odometer_m: None,
+            velocity: None,
         };
         let report = RunReport {
             epochs: vec![rec],

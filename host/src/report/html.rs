@@ -97,6 +97,189 @@ fn line_chart(title: &str, xl: &str, yl: &str, series: &[Series], equal: bool) -
     Ok(svg)
 }
 
+/// Markers instead of lines: series that break off and resume (epochs with and
+/// without a GNSS fix) keep one colour and one legend entry each.
+fn scatter_chart(
+    title: &str,
+    xl: &str,
+    yl: &str,
+    series: &[Series],
+    equal: bool,
+) -> Result<String> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| anyhow!("{e:?}"))?;
+        let (xr, yr) = bounds(series, equal);
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 18))
+            .margin(10)
+            .x_label_area_size(36)
+            .y_label_area_size(60)
+            .build_cartesian_2d(xr, yr)
+            .map_err(|e| anyhow!("{e:?}"))?;
+        chart
+            .configure_mesh()
+            .x_desc(xl)
+            .y_desc(yl)
+            .draw()
+            .map_err(|e| anyhow!("{e:?}"))?;
+        for (i, s) in series.iter().enumerate() {
+            let color = PALETTE[i % PALETTE.len()];
+            chart
+                .draw_series(s.points.iter().map(|&p| Circle::new(p, 2, color.filled())))
+                .map_err(|e| anyhow!("{e:?}"))?
+                .label(s.name.clone())
+                .legend(move |(x, y)| Circle::new((x + 8, y), 3, color.filled()));
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|e| anyhow!("{e:?}"))?;
+        root.present().map_err(|e| anyhow!("{e:?}"))?;
+    }
+    Ok(svg)
+}
+
+/// The GNSS sections, when the run had fixes: the trajectory by fix availability,
+/// the position error against its predicted 3 sd (with ground truth) and the
+/// adjusted positions' residuals to the fixes.
+fn gnss_sections(report: &RunReport) -> Result<Vec<(&'static str, String)>> {
+    if report.epochs.iter().all(|e| e.gnss.is_none()) {
+        return Ok(Vec::new());
+    }
+    let mut out = Vec::new();
+    let top = |fix: bool| -> Vec<(f64, f64)> {
+        report
+            .epochs
+            .iter()
+            .filter(|e| e.gnss.is_some() == fix)
+            .map(|e| (e.left.x, e.left.y))
+            .collect()
+    };
+    let trajectory = [
+        Series {
+            name: "with a GNSS fix".into(),
+            points: top(true),
+        },
+        Series {
+            name: "without (outage)".into(),
+            points: top(false),
+        },
+    ];
+    out.push((
+        "GNSS availability",
+        scatter_chart(
+            "Trajectory by GNSS availability (top view)",
+            "X (m)",
+            "Y (m)",
+            &trajectory,
+            true,
+        )?,
+    ));
+    let time = |e: &super::EpochRecord| e.time.unwrap_or(e.epoch as f64);
+    if let Some(gt) = &report.ground_truth {
+        let error: Vec<(f64, f64)> = report
+            .epochs
+            .iter()
+            .zip(gt)
+            .map(|(e, g)| {
+                let d = [e.left.x - g[0], e.left.y - g[1], e.left.z - g[2]];
+                (time(e), (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt())
+            })
+            .collect();
+        let sd3: Vec<(f64, f64)> = report
+            .epochs
+            .iter()
+            .filter_map(|e| {
+                let s = e.left.sigma?;
+                Some((
+                    time(e),
+                    3.0 * (s[3] * s[3] + s[4] * s[4] + s[5] * s[5]).sqrt(),
+                ))
+            })
+            .collect();
+        let s = [
+            Series {
+                name: "position error".into(),
+                points: error,
+            },
+            Series {
+                name: "3 x predicted sd".into(),
+                points: sd3,
+            },
+        ];
+        out.push((
+            "Position error and its predicted precision",
+            line_chart(
+                "Position error against the truth",
+                "time (s)",
+                "m",
+                &s,
+                false,
+            )?,
+        ));
+    }
+    let residual = |a: usize| Series {
+        name: ["X", "Y", "Z"][a].into(),
+        points: report
+            .epochs
+            .iter()
+            .filter_map(|e| Some((time(e), e.gnss?.residual_m[a])))
+            .collect(),
+    };
+    out.push((
+        "GNSS residuals",
+        scatter_chart(
+            "Adjusted position minus GNSS fix",
+            "time (s)",
+            "m",
+            &[residual(0), residual(1), residual(2)],
+            false,
+        )?,
+    ));
+    Ok(out)
+}
+
+/// Speed per epoch with its standard deviation band.
+fn speed_section(report: &RunReport) -> Result<Option<String>> {
+    let pts = |k: f64| -> Vec<(f64, f64)> {
+        report
+            .epochs
+            .iter()
+            .filter_map(|e| {
+                let v = e.velocity?;
+                let sd = v.sd_speed_m_s.unwrap_or(0.0);
+                Some((
+                    e.time.unwrap_or(e.epoch as f64),
+                    3.6 * (v.speed_m_s + k * sd),
+                ))
+            })
+            .collect()
+    };
+    let speed = pts(0.0);
+    if speed.is_empty() {
+        return Ok(None);
+    }
+    let s = [
+        Series {
+            name: "speed".into(),
+            points: speed,
+        },
+        Series {
+            name: "+ 1 sd".into(),
+            points: pts(1.0),
+        },
+        Series {
+            name: "- 1 sd".into(),
+            points: pts(-1.0),
+        },
+    ];
+    line_chart("Speed of the left camera", "time (s)", "km/h", &s, false).map(Some)
+}
+
 fn histogram(title: &str, xl: &str, values: &[f32], bins: usize, max: f64) -> Result<String> {
     let mut counts = vec![0u32; bins];
     for &v in values {
@@ -286,6 +469,10 @@ pub fn write_html(path: &Path, report: &RunReport) -> Result<()> {
             )?,
         ));
     }
+    sections.extend(gnss_sections(report)?);
+    if let Some(svg) = speed_section(report)? {
+        sections.push(("Speed", svg));
+    }
     let stages = stage_series(report);
     if !stages.is_empty() {
         sections.push((
@@ -373,6 +560,9 @@ mod tests {
                 keypoints: [1000, 990],
                 stereo_matches: 500,
                 stage_ms: [("features".to_string(), 10.0), ("adjust".to_string(), 2.0)].into(),
+                gnss: None,
+                odometer_m: None,
+                velocity: None,
             });
         }
         report.ground_truth = Some((0..5).map(|k| [0.0, k as f64, 0.0]).collect());
@@ -386,7 +576,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("report.html");
         write_html(&path, &report).unwrap();
-        let page = std::fs::read_to_string(path).unwrap();
+        let page = std::fs::read_to_string(&path).unwrap();
         assert_eq!(page.matches("<svg").count(), 6);
         for title in [
             "Trajectory",
@@ -400,5 +590,31 @@ mod tests {
             assert!(page.contains(title), "{title} missing");
         }
         assert!(page.contains("straight &lt;synthetic&gt;"));
+
+        // With fixes at some epochs and times: the GNSS plots and the speed.
+        for (k, e) in report.epochs.iter_mut().enumerate() {
+            e.time = Some(0.1 * k as f64);
+            e.left.sigma = Some([1e-4, 1e-4, 1e-4, 0.01, 0.01, 0.01]);
+            e.gnss = (k != 2).then_some(GnssRecord {
+                position: [0.0, k as f64, 0.0],
+                sigma_m: 0.02,
+                residual_m: [0.0, 0.01 * k as f64, 0.0],
+            });
+        }
+        let v = crate::report::velocities(&report.epochs);
+        for (e, v) in report.epochs.iter_mut().zip(v) {
+            e.velocity = v;
+        }
+        write_html(&path, &report).unwrap();
+        let page = std::fs::read_to_string(&path).unwrap();
+        assert_eq!(page.matches("<svg").count(), 10);
+        for title in [
+            "GNSS availability",
+            "Position error",
+            "GNSS residuals",
+            "Speed",
+        ] {
+            assert!(page.contains(title), "{title} missing");
+        }
     }
 }

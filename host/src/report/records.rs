@@ -101,6 +101,35 @@ pub struct EpochRecord {
     pub stereo_matches: u32,
     /// Milliseconds per stage (features, matching, adjustment, link, ...).
     pub stage_ms: BTreeMap<String, f64>,
+    /// The GNSS fix sent with the epoch, and the adjusted position's residual to it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gnss: Option<GnssRecord>,
+    /// The odometer distance from the previous epoch sent with the epoch, m.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub odometer_m: Option<f64>,
+    /// Velocity of the left perspective centre ([`super::velocity`]).
+    #[serde(default)]
+    pub velocity: Option<VelocityRecord>,
+}
+
+/// A GNSS fix an epoch was adjusted with.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct GnssRecord {
+    /// The fix (object frame, m) and its sigma per coordinate.
+    pub position: [f64; 3],
+    pub sigma_m: f64,
+    /// Adjusted position minus the fix, m.
+    pub residual_m: [f64; 3],
+}
+
+/// Velocity of an epoch's left perspective centre (object frame).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct VelocityRecord {
+    /// m/s along X, Y, Z.
+    pub v_m_s: [f64; 3],
+    /// Speed, m/s, and its standard deviation (None without position sigmas).
+    pub speed_m_s: f64,
+    pub sd_speed_m_s: Option<f64>,
 }
 
 /// The global chi-square test of an epoch's window adjustment (95 %, two-sided).

@@ -6,6 +6,7 @@
 //! trajectory. [`generate`] writes the dataset in the KITTI or rig.toml layout
 //! with `gt_poses.txt`, optional depth maps and realistic imperfections
 //! ([`realism`]). Everything is deterministic for a seed.
+pub mod aiding;
 pub mod geometry;
 pub mod material;
 pub mod noise;
@@ -50,6 +51,8 @@ pub struct SynthOptions {
     /// Texture the facades with these photographs (files, or directories of them;
     /// [`photo`]); none: the procedural facades.
     pub photo_textures: Vec<PathBuf>,
+    /// Simulated GNSS and odometer ([`aiding`]); the default writes neither.
+    pub aiding: aiding::AidingOptions,
 }
 
 impl SynthOptions {
@@ -68,6 +71,7 @@ impl SynthOptions {
             progress: false,
             size: None,
             photo_textures: Vec::new(),
+            aiding: aiding::AidingOptions::default(),
         }
     }
 }
@@ -199,6 +203,11 @@ pub fn generate(opts: &SynthOptions) -> anyhow::Result<SynthSummary> {
         .map(|k| format!("{:.6}\n", k as f64 * plan.dt))
         .collect();
     std::fs::write(out.join(TIMES_FILE), times)?;
+    let datum = match layout {
+        LayoutChoice::Kitti => rigfile::default_datum(),
+        LayoutChoice::Rig => origin,
+    };
+    aiding::write_aiding(out, &plan, (&datum, &origin), &opts.aiding, opts.seed)?;
 
     let settings = RenderSettings {
         edge_ss: opts.edge_ss,

@@ -245,6 +245,10 @@ fn traffic_style() -> StreetStyle {
     }
 }
 
+/// Time between epochs of `seed2006`, s: its capture took a new base every 5 frames
+/// of a 30 fps camera, so its 0.915 m per epoch is 5.49 m/s (19.76 km/h).
+pub const SEED2006_EPOCH_S: f64 = 5.0 / 30.0;
+
 /// Default epochs of `drive`: 1.2 km at 2 m per epoch.
 pub const DRIVE_FRAMES: usize = 600;
 
@@ -490,7 +494,11 @@ pub fn plan(name: &str, frames: Option<usize>, seed: u64) -> Result<ScenePlan, S
         frames,
         layout,
         seed_names: name == "seed2014",
-        dt: 0.1,
+        dt: if name == "seed2006" {
+            SEED2006_EPOCH_S
+        } else {
+            0.1
+        },
         camera_height,
         lane,
         vibration_deg: if name == "hard" { 0.3 } else { 0.15 },

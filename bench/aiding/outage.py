@@ -1,0 +1,73 @@
+#!/usr/bin/env python3
+"""Bars of a GNSS outage run (`phototraverse run DATASET --gnss-outage A..B`) against the
+ground truth in its report.json, and against an images-only run of the same dataset
+(`--images-only`) re-anchored to the truth at the outage's first epoch.
+
+Prints, for the epochs whose time lies in the outage: the largest position error, the same
+for the images-only run after re-anchoring (its pose at the outage's first epoch replaced by
+the truth, the rest of its trajectory moved rigidly with it), and the share of epochs whose
+error is within 3 standard deviations on each coordinate (the sd of eop.csv / report.json);
+for the other epochs: the RMS position error (3D) and per coordinate. Distances in metres.
+
+usage: outage.py AIDED_DIR IMAGES_ONLY_DIR START_S END_S
+"""
+import json
+import math
+import sys
+
+import numpy as np
+
+
+def load(d):
+    r = json.load(open(f"{d}/report.json"))
+    return r["epochs"], np.array(r["ground_truth"])
+
+
+def kitti(path):
+    """4x4 poses of a KITTI pose file."""
+    rows = []
+    for line in open(path):
+        if line.strip() and not line.startswith("#"):
+            m = np.eye(4)
+            m[:3] = np.array([float(v) for v in line.split()]).reshape(3, 4)
+            rows.append(m)
+    return rows
+
+
+def centre(e):
+    return np.array([e["left"]["x"], e["left"]["y"], e["left"]["z"]])
+
+
+def main():
+    aided_dir, images_dir, t0, t1 = sys.argv[1], sys.argv[2], float(sys.argv[3]), float(sys.argv[4])
+    ep, gt = load(aided_dir)
+    ep_img, _ = load(images_dir)
+    inside = [i for i, e in enumerate(ep) if t0 <= e["time"] <= t1]
+    outside = [i for i, e in enumerate(ep) if not t0 <= e["time"] <= t1]
+    err = np.array([centre(e) - gt[i] for i, e in enumerate(ep)])
+    first = inside[0]
+    # Re-anchoring in the KITTI frame of poses.txt: the images-only pose at `first` onto
+    # the true one (gt_poses.txt), the rest of the trajectory moved rigidly with it.
+    dataset = json.load(open(f"{images_dir}/report.json"))["dataset"]
+    truth = kitti(f"{dataset}/gt_poses.txt")
+    est = kitti(f"{images_dir}/poses.txt")
+    anchor = truth[first] @ np.linalg.inv(est[first])
+    img_err = [np.linalg.norm((anchor @ est[i])[:3, 3] - truth[i][:3, 3]) for i in inside]
+    norms = np.linalg.norm(err, axis=1)
+    covered = 0
+    for i in inside:
+        sd = ep[i]["left"]["sigma"]
+        if sd and all(abs(err[i][a]) <= 3 * sd[3 + a] for a in range(3)):
+            covered += 1
+    dist = sum(np.linalg.norm(gt[i] - gt[i - 1]) for i in inside[1:])
+    print(f"outage {t0}..{t1} s: epochs {inside[0]}..{inside[-1]} ({len(inside)}), {dist:.1f} m")
+    print(f"  largest position error inside: {norms[inside].max():.3f} m (epoch {inside[int(np.argmax(norms[inside]))]})")
+    print(f"  images only, re-anchored at epoch {first}: largest error {max(img_err):.3f} m")
+    print(f"  within 3 sd on every coordinate: {covered}/{len(inside)} = {100 * covered / len(inside):.1f} %")
+    rms = math.sqrt(float(np.mean(norms[outside] ** 2)))
+    per = np.sqrt(np.mean(err[outside] ** 2, axis=0))
+    print(f"  outside ({len(outside)} epochs): RMS position error {rms:.4f} m (X/Y/Z {per[0]:.4f}/{per[1]:.4f}/{per[2]:.4f})")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,105 @@
+//! The velocity of every epoch from the adjusted positions and the epoch times.
+//!
+//! Central differences `v_k = (C_{k+1} - C_{k-1}) / (t_{k+1} - t_{k-1})` (one-sided at
+//! the ends): the central difference's error from the path's curvature is second
+//! order in the epoch interval, and it averages two steps' scale errors. The speed's
+//! standard deviation propagates the two positions' standard deviations along the
+//! direction of motion as if they were independent; consecutive positions of a
+//! traverse are positively correlated, so this is an upper bound.
+use super::records::{EpochRecord, VelocityRecord};
+
+/// Velocities of `epochs` (in order, with times), `None` where an epoch or a
+/// neighbour has no time, or they coincide.
+pub fn velocities(epochs: &[EpochRecord]) -> Vec<Option<VelocityRecord>> {
+    let n = epochs.len();
+    (0..n)
+        .map(|k| {
+            if n < 2 {
+                return None;
+            }
+            let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
+            velocity(&epochs[a], &epochs[b])
+        })
+        .collect()
+}
+
+fn velocity(a: &EpochRecord, b: &EpochRecord) -> Option<VelocityRecord> {
+    let dt = b.time? - a.time?;
+    if dt.is_nan() || dt <= 0.0 {
+        return None;
+    }
+    let d = [
+        b.left.x - a.left.x,
+        b.left.y - a.left.y,
+        b.left.z - a.left.z,
+    ];
+    let v = d.map(|x| x / dt);
+    let speed = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    let sd_speed_m_s = a.left.sigma.zip(b.left.sigma).map(|(sa, sb)| {
+        // Variance along the unit direction u of each position: sum u_i^2 s_i^2.
+        let u = v.map(|x| if speed > 0.0 { x / speed } else { 0.0 });
+        let along = |s: [f64; 6]| (0..3).map(|i| (u[i] * s[3 + i]).powi(2)).sum::<f64>();
+        (along(sa) + along(sb)).sqrt() / dt
+    });
+    Some(VelocityRecord {
+        v_m_s: v,
+        speed_m_s: speed,
+        sd_speed_m_s,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::report::{CameraEop, EpochStatus};
+
+    fn rec(k: usize, t: f64, y: f64, sigma: Option<[f64; 6]>) -> EpochRecord {
+        let eop = CameraEop {
+            omega_deg: 90.0,
+            phi_deg: 0.0,
+            kappa_deg: 0.0,
+            x: 0.0,
+            y,
+            z: 0.0,
+            sigma,
+        };
+        EpochRecord {
+            epoch: k,
+            time: Some(t),
+            status: EpochStatus::Ok,
+            note: None,
+            left: eop,
+            right: eop,
+            sigma0: None,
+            chi2_passed: None,
+            chi2: None,
+            observations: 0,
+            tie_points: 0,
+            keypoints: [0; 2],
+            stereo_matches: 0,
+            stage_ms: Default::default(),
+            gnss: None,
+            odometer_m: None,
+            velocity: None,
+        }
+    }
+
+    #[test]
+    fn central_differences_with_the_speed_sigma_along_the_motion() {
+        let s = Some([0.0, 0.0, 0.0, 0.5, 0.003, 0.5]);
+        let e = [
+            rec(0, 0.0, 0.0, s),
+            rec(1, 0.5, 1.0, s),
+            rec(2, 1.0, 3.0, s),
+        ];
+        let v = velocities(&e);
+        // Ends one-sided, middle central.
+        assert_eq!(v[0].unwrap().v_m_s, [0.0, 2.0, 0.0]);
+        assert_eq!(v[1].unwrap().v_m_s, [0.0, 3.0, 0.0]);
+        assert_eq!(v[2].unwrap().v_m_s, [0.0, 4.0, 0.0]);
+        // Only the sigma along Y counts: sqrt(2) * 3 mm over 1 s.
+        let sd = v[1].unwrap().sd_speed_m_s.unwrap();
+        assert!((sd - 0.003 * 2f64.sqrt()).abs() < 1e-12, "{sd}");
+        assert!(velocities(&e[..1])[0].is_none());
+    }
+}

@@ -1,0 +1,111 @@
+//! Bridging a GNSS outage end to end: a rendered drive with simulated 2 cm GNSS fixes
+//! at every epoch but those of an outage over a turn, run through the in-process
+//! firmware, against its ground truth. Outside the outage the fixes hold the traverse
+//! to about their precision; inside, the images carry it, and the standard deviations
+//! the run states grow with the distance from the last fix.
+mod common;
+use common::ok;
+use std::path::Path;
+
+/// The outage, seconds: epochs 40 to 70 of the drive (2 m per epoch, 10 per second),
+/// 60 m through its first turn (radius 25 m, 100 to 139 m).
+const OUTAGE: (f64, f64) = (4.0, 7.0);
+/// Bounds, m. Measured here: RMS 0.025 m outside; inside at most 0.127 m (the images
+/// alone, re-anchored to the truth where the outage starts: 0.205 m), 29 of 31 epochs
+/// within 3 sd. Before the window let go of the fixed past on a fix, the RMS error with
+/// fixes at every epoch was over 1 m on the 1.2 km drive: the fixes could not pull the
+/// window off the drifted poses it held exact.
+const MAX_RMS_OUTSIDE_M: f64 = 0.035;
+const MAX_ERROR_INSIDE_M: f64 = 0.2;
+
+/// Per epoch: time, position error (m), whether it is within 3 sd on every coordinate.
+fn centre_errors(out: &Path) -> Vec<(f64, f64, bool)> {
+    let text = std::fs::read_to_string(out.join("report.json")).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let gt = v["ground_truth"].as_array().unwrap();
+    v["epochs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| {
+            let l = &e["left"];
+            let g: Vec<f64> = gt[e["epoch"].as_u64().unwrap() as usize]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|x| x.as_f64().unwrap())
+                .collect();
+            let d = [
+                l["x"].as_f64().unwrap() - g[0],
+                l["y"].as_f64().unwrap() - g[1],
+                l["z"].as_f64().unwrap() - g[2],
+            ];
+            let sd = l["sigma"]
+                .as_array()
+                .map(|s| [3, 4, 5].map(|k| s[k].as_f64().unwrap()));
+            let covered = sd.is_some_and(|s: [f64; 3]| (0..3).all(|a| d[a].abs() <= 3.0 * s[a]));
+            let time = e["time"].as_f64().unwrap();
+            let err = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            (time, err, covered)
+        })
+        .collect()
+}
+
+#[test]
+fn the_images_bridge_an_outage_over_a_turn() {
+    let t = tempfile::tempdir().unwrap();
+    let ds = t.path().join("ds");
+    let out = t.path().join("out");
+    let s = |p: &Path| p.to_str().unwrap().to_owned();
+    let scene = [
+        "synth", "--scene", "drive", "--frames", "90", "--size", "320x240",
+    ];
+    let aiding = ["--gnss", "0.02", "--odometer", "0.005", "--out", &s(&ds)];
+    ok(&[&scene[..], &aiding[..]].concat());
+    let outage = format!("{}..{}", OUTAGE.0, OUTAGE.1);
+    ok(&[
+        "run",
+        &s(&ds),
+        "--out",
+        &s(&out),
+        "--link",
+        "inproc",
+        "--gnss-outage",
+        &outage,
+    ]);
+    let rows = centre_errors(&out);
+    let inside = |t: f64| t >= OUTAGE.0 && t <= OUTAGE.1;
+    let outside: Vec<f64> = rows.iter().filter(|r| !inside(r.0)).map(|r| r.1).collect();
+    let rms = (outside.iter().map(|e| e * e).sum::<f64>() / outside.len() as f64).sqrt();
+    let worst = rows
+        .iter()
+        .filter(|r| inside(r.0))
+        .map(|r| r.1)
+        .fold(0.0, f64::max);
+    let n_in = rows.iter().filter(|r| inside(r.0)).count();
+    let covered = rows.iter().filter(|r| inside(r.0) && r.2).count();
+    println!("outside RMS {rms:.4} m; inside: largest {worst:.3} m, {covered}/{n_in} within 3 sd");
+    assert!(
+        rms <= MAX_RMS_OUTSIDE_M,
+        "RMS error outside the outage {rms:.4} m"
+    );
+    assert!(
+        worst <= MAX_ERROR_INSIDE_M,
+        "largest error in the outage {worst:.3} m"
+    );
+    assert!(
+        10 * covered >= 9 * n_in,
+        "{covered} of {n_in} outage epochs within 3 sd"
+    );
+    // The fixes are in the report where they were sent, with residuals, and every
+    // epoch has a velocity in eop.csv.
+    let report = std::fs::read_to_string(out.join("report.json")).unwrap();
+    assert_eq!(report.matches("\"residual_m\"").count(), rows.len() - n_in);
+    let eop = std::fs::read_to_string(out.join("eop.csv")).unwrap();
+    let header: Vec<&str> = eop.lines().next().unwrap().split(',').collect();
+    let speed = header.iter().position(|h| *h == "speed_m_s").unwrap();
+    for line in eop.lines().skip(1).filter(|l| l.contains(",left,")) {
+        let v: f64 = line.split(',').nth(speed).unwrap().parse().unwrap();
+        assert!((v - 20.0).abs() < 1.0, "speed {v} m/s, truth 20: {line}");
+    }
+}
