@@ -1018,12 +1018,17 @@ impl<'a> Window<'a> {
     /// by. Each fixed epoch keeps the absolute covariance it left with, so the
     /// uncertainty of a traverse without fixes accumulates step by step, as it should.
     pub fn epoch_absolute_covariance(&self, i: usize) -> Option<[f64; 36]> {
-        let mut cov = self.epoch_covariance(i)?;
+        let cov = self.epoch_covariance(i)?;
+        Some(self.plus_anchor(i, cov))
+    }
+
+    /// `cov` (of slot `i`, relative to the fixed epochs) plus the newest fixed epoch's
+    /// absolute covariance carried rigidly to the slot: `cov + J C_a J^T`.
+    fn plus_anchor(&self, i: usize, mut cov: [f64; 36]) -> [f64; 36] {
         let Some(anchor) = self.n_fixed.checked_sub(1).map(|a| &self.fixed[a]) else {
-            return Some(cov);
+            return cov;
         };
         let j = rigid_transport(&anchor.params, &self.epochs[i].params);
-        // cov += J C_a J^T
         let mut jc = [0.0; 36];
         for r in 0..6 {
             for c in 0..6 {
@@ -1035,21 +1040,23 @@ impl<'a> Window<'a> {
                 cov[r * 6 + c] += (0..6).map(|k| jc[r * 6 + k] * j[c * 6 + k]).sum::<f64>();
             }
         }
-        Some(cov)
+        cov
     }
 
-    /// The absolute covariance a leaving (oldest) epoch keeps as a fixed epoch, at no
-    /// less than its a-priori value (sigma0 = 1): the a-posteriori scale comes from
-    /// residuals that do not see the errors a traverse accumulates, which are correlated
-    /// from epoch to epoch (the same points on the same surfaces), so below 1 it would
-    /// make the accumulated precision optimistic.
+    /// The absolute covariance a leaving (oldest) epoch keeps as a fixed epoch: its
+    /// window covariance at no less than its a-priori value (sigma0 = 1), plus the
+    /// anchor's. The a-posteriori scale comes from residuals that do not see the errors
+    /// a traverse accumulates, which are correlated from epoch to epoch (the same points
+    /// on the same surfaces), so below 1 it would make the accumulated precision
+    /// optimistic. Only the step's own part is scaled: the anchor's was, at its slide
+    /// (scaling the sum compounded the scale at every slide).
     fn leaving_covariance(&self) -> Option<[f64; 36]> {
-        let mut cov = self.epoch_absolute_covariance(0)?;
+        let mut cov = self.epoch_covariance(0)?;
         if self.cov_s02 > 0.0 && self.cov_s02 < 1.0 {
             let k = 1.0 / self.cov_s02;
             cov.iter_mut().for_each(|v| *v *= k);
         }
-        Some(cov)
+        Some(self.plus_anchor(0, cov))
     }
 
     /// Standard deviations of slot `i` with respect to the datum (omega, phi, kappa

@@ -54,57 +54,35 @@ fn bounds(series: &[Series], equal_aspect: bool) -> (std::ops::Range<f64>, std::
     (xa..xb, ya..yb)
 }
 
-fn line_chart(title: &str, xl: &str, yl: &str, series: &[Series], equal: bool) -> Result<String> {
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| anyhow!("{e:?}"))?;
-        let (xr, yr) = bounds(series, equal);
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 18))
-            .margin(10)
-            .x_label_area_size(36)
-            .y_label_area_size(60)
-            .build_cartesian_2d(xr, yr)
-            .map_err(|e| anyhow!("{e:?}"))?;
-        chart
-            .configure_mesh()
-            .x_desc(xl)
-            .y_desc(yl)
-            .draw()
-            .map_err(|e| anyhow!("{e:?}"))?;
-        for (i, s) in series.iter().enumerate() {
-            let color = PALETTE[i % PALETTE.len()];
-            chart
-                .draw_series(LineSeries::new(
-                    s.points.iter().copied(),
-                    color.stroke_width(2),
-                ))
-                .map_err(|e| anyhow!("{e:?}"))?
-                .label(s.name.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
-        }
-        if series.len() > 1 {
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw()
-                .map_err(|e| anyhow!("{e:?}"))?;
-        }
-        root.present().map_err(|e| anyhow!("{e:?}"))?;
-    }
-    Ok(svg)
+/// How a chart draws its series.
+#[derive(Clone, Copy, PartialEq)]
+enum Mark {
+    Lines,
+    /// Markers: series that break off and resume (epochs with and without a GNSS fix)
+    /// keep one colour and one legend entry each.
+    Dots,
 }
 
-/// Markers instead of lines: series that break off and resume (epochs with and
-/// without a GNSS fix) keep one colour and one legend entry each.
+fn line_chart(title: &str, xl: &str, yl: &str, series: &[Series], equal: bool) -> Result<String> {
+    chart(title, (xl, yl), series, equal, Mark::Lines)
+}
+
 fn scatter_chart(
     title: &str,
     xl: &str,
     yl: &str,
     series: &[Series],
     equal: bool,
+) -> Result<String> {
+    chart(title, (xl, yl), series, equal, Mark::Dots)
+}
+
+fn chart(
+    title: &str,
+    (xl, yl): (&str, &str),
+    series: &[Series],
+    equal: bool,
+    mark: Mark,
 ) -> Result<String> {
     let mut svg = String::new();
     {
@@ -126,18 +104,27 @@ fn scatter_chart(
             .map_err(|e| anyhow!("{e:?}"))?;
         for (i, s) in series.iter().enumerate() {
             let color = PALETTE[i % PALETTE.len()];
-            chart
-                .draw_series(s.points.iter().map(|&p| Circle::new(p, 2, color.filled())))
-                .map_err(|e| anyhow!("{e:?}"))?
+            let points = s.points.iter().copied();
+            let drawn = match mark {
+                Mark::Lines => chart
+                    .draw_series(LineSeries::new(points, color.stroke_width(2)))
+                    .map_err(|e| anyhow!("{e:?}"))?,
+                Mark::Dots => chart
+                    .draw_series(points.map(|p| Circle::new(p, 2, color.filled())))
+                    .map_err(|e| anyhow!("{e:?}"))?,
+            };
+            drawn
                 .label(s.name.clone())
-                .legend(move |(x, y)| Circle::new((x + 8, y), 3, color.filled()));
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| anyhow!("{e:?}"))?;
+        if series.len() > 1 {
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()
+                .map_err(|e| anyhow!("{e:?}"))?;
+        }
         root.present().map_err(|e| anyhow!("{e:?}"))?;
     }
     Ok(svg)
