@@ -18,7 +18,7 @@ use phototraverse_core::protocol::messages::{
 };
 use phototraverse_core::sift::SiftError;
 use phototraverse_core::traverse::{
-    self, flags, AuxObservations, Traverse, TraverseConfig, TraverseError, TraverseMode,
+    self, flags, AuxObservations, GnssFix, Traverse, TraverseConfig, TraverseError, TraverseMode,
     WindowObservation,
 };
 
@@ -239,7 +239,11 @@ fn aux_of(input: &EpochInput) -> AuxObservations {
     let sigma = (a.gnss_sigma_m[0] + a.gnss_sigma_m[1] + a.gnss_sigma_m[2]) / 3.0;
     AuxObservations {
         odometer: (a.flags & AUX_ODOMETER != 0).then_some((a.odometer_m, a.odometer_sigma_m)),
-        gnss: (a.flags & AUX_GNSS != 0).then_some((a.gnss_m, sigma)),
+        gnss: (a.flags & AUX_GNSS != 0).then_some(GnssFix {
+            position_m: a.gnss_m,
+            sigma_m: sigma,
+            lever_arm_m: a.gnss_lever_arm_m,
+        }),
     }
 }
 

@@ -203,6 +203,7 @@ impl<'d> Run<'d> {
             odometer_sigma_m,
             gnss_m,
             gnss_sigma_m: [sigma; 3],
+            gnss_lever_arm_m: self.ds.gnss_setup.lever_arm_m,
         })
     }
 
@@ -279,24 +280,15 @@ impl<'d> Run<'d> {
     fn predicted(&self, i: usize, time: f64, note: String) -> EpochRecord {
         let left = self.prediction(time);
         let right = self.rig.right_pose(&left);
+        let eop = |p: &Pose| CameraEop::from_pose(p, None);
         EpochRecord {
-            epoch: i,
-            time: Some(time),
-            status: EpochStatus::Predicted,
             note: Some(note),
-            left: CameraEop::from_pose(&left, None),
-            right: CameraEop::from_pose(&right, None),
-            sigma0: None,
-            chi2_passed: None,
-            chi2: None,
-            observations: 0,
-            tie_points: 0,
-            keypoints: [0; 2],
-            stereo_matches: 0,
-            stage_ms: Default::default(),
-            gnss: None,
-            odometer_m: None,
-            velocity: None,
+            ..EpochRecord::posed(
+                i,
+                Some(time),
+                EpochStatus::Predicted,
+                (eop(&left), eop(&right)),
+            )
         }
     }
 
@@ -488,15 +480,18 @@ impl<'d> Run<'d> {
     }
 }
 
-/// What the epoch's Aux carried, with the adjusted position's residual to the fix.
+/// What the epoch's Aux carried, with the adjusted antenna position's residual to the
+/// fix (the centre plus the lever arm turned by the adjusted attitude).
 fn note_aux(rec: &mut EpochRecord, aux: Option<Aux>) {
     let Some(a) = aux else { return };
     if a.flags & AUX_GNSS != 0 {
-        let l = &rec.left;
+        let pose = rec.left.to_pose();
+        let lever = pose.rotation().transpose() * nalgebra::Vector3::from(a.gnss_lever_arm_m);
+        let antenna = [0, 1, 2].map(|k| pose.centre[k] + lever[k]);
         rec.gnss = Some(GnssRecord {
             position: a.gnss_m,
             sigma_m: a.gnss_sigma_m[0],
-            residual_m: [l.x - a.gnss_m[0], l.y - a.gnss_m[1], l.z - a.gnss_m[2]],
+            residual_m: [0, 1, 2].map(|k| antenna[k] - a.gnss_m[k]),
         });
     }
     if a.flags & AUX_ODOMETER != 0 {

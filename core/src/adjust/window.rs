@@ -354,6 +354,8 @@ struct EpochSlot {
     cov: [f64; 36],
     gnss: [f64; 3],
     gnss_sigma: f64,
+    /// The GNSS antenna in the left camera's frame ([`Window::set_gnss_antenna`]).
+    gnss_lever: [f64; 3],
     odometer: f64,
     odometer_sigma: f64,
     time: f64,
@@ -847,8 +849,22 @@ impl<'a> Window<'a> {
         position: [f64; 3],
         sigma_m: f64,
     ) -> Result<(), AdjustError> {
+        self.set_gnss_antenna(epoch, position, sigma_m, [0.0; 3])
+    }
+
+    /// A GNSS position of an antenna at `lever_arm` from the epoch's left perspective
+    /// centre (left camera frame: x right, y up, z backwards, m) with its sigma (m): the
+    /// constraint `C + M^T lever_arm = G`.
+    pub fn set_gnss_antenna(
+        &mut self,
+        epoch: u32,
+        position: [f64; 3],
+        sigma_m: f64,
+        lever_arm: [f64; 3],
+    ) -> Result<(), AdjustError> {
         let slot = self.slot_of(epoch).ok_or(AdjustError::Unknown)?;
-        if !position.iter().all(|v| v.is_finite()) || !(sigma_m > 0.0) || !sigma_m.is_finite() {
+        let finite = |v: &[f64; 3]| v.iter().all(|x| x.is_finite());
+        if !finite(&position) || !finite(&lever_arm) || !(sigma_m > 0.0) || !sigma_m.is_finite() {
             return Err(AdjustError::NotFinite);
         }
         let e = &mut self.epochs[slot];
@@ -858,7 +874,11 @@ impl<'a> Window<'a> {
             position[2] - self.origin[2],
         ];
         e.gnss_sigma = sigma_m;
+        e.gnss_lever = lever_arm;
         e.flags |= EP_GNSS;
+        // A fix, not the past held exact, anchors the window from now on
+        // ([`Self::slide`]): the first fix after an outage pulls at once.
+        self.release_fixed();
         Ok(())
     }
 
@@ -1265,25 +1285,10 @@ impl<'a> Window<'a> {
                 self.point_start[o.point as usize] += 1;
             }
         }
-        let mut k = 0;
-        for i in 0..self.n_obs {
-            let o = self.obs[i];
-            let released = release && self.slot_of(o.epoch).is_none();
-            let keep =
-                Some(o.epoch) != expired && !released && self.point_start[o.point as usize] > 0;
-            if keep {
-                self.obs[k] = o;
-                k += 1;
-            } else {
-                let p = &mut self.points[o.point as usize];
-                p.nobs = p.nobs.saturating_sub(1);
-                if p.nobs == 0 && p.flags & PT_PRIOR == 0 {
-                    p.flags = 0;
-                }
-            }
-        }
-        self.n_obs = k;
-        self.indexed = None;
+        self.retain_observations(|w, o| {
+            let released = release && w.slot_of(o.epoch).is_none();
+            Some(o.epoch) != expired && !released && w.point_start[o.point as usize] > 0
+        });
         if release {
             self.n_fixed = 0;
         }
@@ -1304,9 +1309,25 @@ impl<'a> Window<'a> {
             // the marginal holds exactly, is taken out so it does not count twice.
             info.iter_mut().for_each(|v| *v *= s02);
             if next.flags & EP_GNSS != 0 {
+                // J^T W J of the fix: the centre rows are the identity, the angle rows
+                // the lever arm's turn.
                 let w = 1.0 / (next.gnss_sigma * next.gnss_sigma);
-                for a in 3..6 {
-                    info[a * 6 + a] = (info[a * 6 + a] - w).max(0.0);
+                let (_, ja) = gnss_residual(next);
+                let jrow = |a: usize, k: usize| {
+                    if k < 3 {
+                        ja[a][k]
+                    } else {
+                        f64::from(k - 3 == a)
+                    }
+                };
+                for r in 0..6 {
+                    for c in 0..6 {
+                        let jtj: f64 = (0..3).map(|a| jrow(a, r) * jrow(a, c)).sum();
+                        info[r * 6 + c] -= w * jtj;
+                    }
+                }
+                for a in 0..6 {
+                    info[a * 6 + a] = info[a * 6 + a].max(0.0);
                 }
             }
         }
@@ -1373,6 +1394,37 @@ impl<'a> Window<'a> {
             );
         }
         self.rig_cov_valid = false;
+    }
+
+    /// Keeps the observations `keep` accepts, in order; a point left without one (and
+    /// without a prior) is freed.
+    fn retain_observations(&mut self, keep: impl Fn(&Self, &Observation) -> bool) {
+        let mut k = 0;
+        for i in 0..self.n_obs {
+            let o = self.obs[i];
+            if keep(self, &o) {
+                self.obs[k] = o;
+                k += 1;
+            } else {
+                let p = &mut self.points[o.point as usize];
+                p.nobs = p.nobs.saturating_sub(1);
+                if p.nobs == 0 && p.flags & PT_PRIOR == 0 {
+                    p.flags = 0;
+                }
+            }
+        }
+        self.n_obs = k;
+        self.indexed = None;
+    }
+
+    /// Lets go of the fixed epochs: their observations leave, and the window's link to
+    /// the past is its first epoch's prior alone.
+    fn release_fixed(&mut self) {
+        if self.n_fixed == 0 {
+            return;
+        }
+        self.retain_observations(|w, o| w.slot_of(o.epoch).is_some());
+        self.n_fixed = 0;
     }
 
     /// Moves the local origin by `shift` (local coordinates).
@@ -1930,13 +1982,13 @@ impl<'a> Window<'a> {
             let (c1, c2) = (centres(e.saturating_sub(1)), centres(e));
             if ep.flags & EP_GNSS != 0 {
                 let w = 1.0 / (ep.gnss_sigma * ep.gnss_sigma);
+                let (r, j) = gnss_residual(&ep);
                 for a in 0..3 {
-                    cost += self.row(
-                        normal,
-                        &[(6 * e + 3 + a, 1.0)],
-                        ep.params[3 + a] - ep.gnss[a],
-                        w,
-                    );
+                    let mut row = [(6 * e + 3 + a, 1.0); 4];
+                    for k in 0..3 {
+                        row[k + 1] = (6 * e + k, j[a][k]);
+                    }
+                    cost += self.row(normal, &row, r[a], w);
                 }
                 count += 3;
             }
@@ -2791,6 +2843,28 @@ fn carry_prior(
 }
 
 /// Inverts a symmetric positive definite 6x6 (row-major); false when not SPD.
+/// The GNSS residual `C + M^T l - G` of an epoch (local coordinates) and its
+/// derivatives with respect to the angles (`[coordinate][angle]`; the centre's are 1).
+/// Uses the epoch's cached rotation.
+fn gnss_residual(ep: &EpochSlot) -> ([f64; 3], [[f64; 3]; 3]) {
+    let l = ep.gnss_lever;
+    // Rotations hold M and its derivatives column-major: (M^T l)_a = sum_i M[i][a] l_i.
+    let mt_l = |m: &[f64]| -> [f64; 3] {
+        core::array::from_fn(|a| (0..3).map(|i| m[a * 3 + i] * l[i]).sum())
+    };
+    let rot = &ep.rot.0;
+    let ml = mt_l(&rot[..9]);
+    let r = core::array::from_fn(|a| ep.params[3 + a] + ml[a] - ep.gnss[a]);
+    let mut j = [[0.0; 3]; 3];
+    for k in 0..3 {
+        let d = mt_l(&rot[9 * (k + 1)..9 * (k + 2)]);
+        for a in 0..3 {
+            j[a][k] = d[a];
+        }
+    }
+    (r, j)
+}
+
 /// Jacobian (6x6, row-major) of the pose `to` with respect to the pose `from` when both
 /// move as one rigid body with `from`: a small rotation `d` (object frame) of `from`
 /// turns `to` by the same `d` and moves its centre by `d x (C_to - C_from)`. In the
@@ -3114,6 +3188,40 @@ mod tests {
                     (predicted - dt[r]).abs() < 1e-3 * h,
                     "axis {axis}, row {r}: {predicted} against {}",
                     dt[r]
+                );
+            }
+        }
+    }
+
+    /// The GNSS residual's angle derivatives (the lever arm turning with the camera)
+    /// against numerical differentiation.
+    #[test]
+    fn gnss_lever_arm_jacobian_matches_numeric() {
+        let slot = |p: [f64; 6]| {
+            let mut e: EpochSlot = bytemuck::Zeroable::zeroed();
+            e.params = p;
+            e.rot = Rotations::new(p[0], p[1], p[2]);
+            e.gnss = [1.0, 2.0, 3.0];
+            e.gnss_lever = [0.3, 1.1, -0.7];
+            e
+        };
+        let p = [1.55, 0.2, -0.4, 1.0, 2.5, 2.0];
+        let (r0, j) = gnss_residual(&slot(p));
+        // At zero lever the residual is the centre's offset from the fix.
+        let mut plain = slot(p);
+        plain.gnss_lever = [0.0; 3];
+        assert_eq!(gnss_residual(&plain).0, [0.0, 0.5, -1.0]);
+        let h = 1e-7;
+        for k in 0..3 {
+            let mut q = p;
+            q[k] += h;
+            let (r1, _) = gnss_residual(&slot(q));
+            for a in 0..3 {
+                let numeric = (r1[a] - r0[a]) / h;
+                assert!(
+                    (numeric - j[a][k]).abs() < 1e-6,
+                    "d r{a} / d angle {k}: {numeric} against {}",
+                    j[a][k]
                 );
             }
         }

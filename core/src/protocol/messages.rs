@@ -870,6 +870,9 @@ pub struct Aux {
     /// GNSS position in the object frame, m, and its sigmas.
     pub gnss_m: [f64; 3],
     pub gnss_sigma_m: [f64; 3],
+    /// Where the GNSS antenna is, seen from the left perspective centre, in the left
+    /// camera's frame (x right, y up, z backwards), m: the fix is the antenna's.
+    pub gnss_lever_arm_m: [f64; 3],
 }
 
 pub const AUX_ODOMETER: u8 = 1;
@@ -886,6 +889,7 @@ repr!(
             odometer_sigma_m: r.f64()?,
             gnss_m: r.f64s()?,
             gnss_sigma_m: r.f64s()?,
+            gnss_lever_arm_m: r.f64s()?,
         })
     },
     |s, w| {
@@ -895,6 +899,7 @@ repr!(
         w.f64(s.odometer_sigma_m)?;
         w.f64s(&s.gnss_m)?;
         w.f64s(&s.gnss_sigma_m)?;
+        w.f64s(&s.gnss_lever_arm_m)?;
     }
 );
 

@@ -70,6 +70,7 @@ pub fn sample_messages(chunk: &[u8]) -> [Message<'_>; 16] {
             odometer_sigma_m: 0.01,
             gnss_m: [1.0, 2.0, 3.0],
             gnss_sigma_m: [0.1, 0.2, 0.3],
+            gnss_lever_arm_m: [0.0, 1.2, 0.5],
         }),
         Message::Result(sample_result()),
         Message::Stats(Stats {

@@ -140,8 +140,19 @@ impl core::fmt::Display for TraverseError {
 pub struct AuxObservations {
     /// Distance travelled since the previous epoch and its sigma, metres.
     pub odometer: Option<(f64, f64)>,
-    /// Position of the left perspective centre (object frame) and its sigma, metres.
-    pub gnss: Option<([f64; 3], f64)>,
+    /// A GNSS fix.
+    pub gnss: Option<GnssFix>,
+}
+
+/// A GNSS fix of an epoch: the antenna's position, its offset from the left camera.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct GnssFix {
+    /// The antenna's position (object frame) and the sigma of each coordinate, m.
+    pub position_m: [f64; 3],
+    pub sigma_m: f64,
+    /// The antenna seen from the left perspective centre in the left camera's frame
+    /// (x right, y up, z backwards), m; zero: the fix is the perspective centre's.
+    pub lever_arm_m: [f64; 3],
 }
 
 /// A left pose with its time, for the motion prediction.
@@ -642,8 +653,10 @@ impl<'a> Traverse<'a> {
         if let Some((d, s)) = aux.odometer {
             let _ = self.window.set_odometer(id, d, s);
         }
-        if let Some((p, s)) = aux.gnss {
-            let _ = self.window.set_gnss(id, p, s);
+        if let Some(g) = aux.gnss {
+            let _ = self
+                .window
+                .set_gnss_antenna(id, g.position_m, g.sigma_m, g.lever_arm_m);
         }
         if !first && (out.tie_points as usize) < self.cfg.min_tie_points {
             out.flags |= flags::FEW_TIE_POINTS;

@@ -33,8 +33,12 @@ pub struct Args {
     #[arg(long)]
     pub quiet: bool,
     /// GNSS fixes (`time_s X_m Y_m Z_m sigma_m` per line; default: the dataset's gnss.txt).
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", conflicts_with = "gnss_geodetic")]
     pub gnss: Option<PathBuf>,
+    /// Geodetic GNSS fixes (`time_s latitude_deg longitude_deg height_m sigma_m`, WGS84),
+    /// placed with the dataset's [gnss] table (default: the dataset's gnss_geodetic.txt).
+    #[arg(long, value_name = "FILE")]
+    pub gnss_geodetic: Option<PathBuf>,
     /// Odometer distances (`time_s distance_m sigma_m` per line; default: the dataset's
     /// odometer.txt).
     #[arg(long, value_name = "FILE")]
@@ -44,7 +48,7 @@ pub struct Args {
     #[arg(long, value_name = "START_S..END_S", value_parser = aiding::parse_span)]
     pub gnss_outage: Vec<(f64, f64)>,
     /// Orient from the images alone: ignore GNSS and odometer.
-    #[arg(long, conflicts_with_all = ["gnss", "odometer", "gnss_outage"])]
+    #[arg(long, conflicts_with_all = ["gnss", "gnss_geodetic", "odometer", "gnss_outage"])]
     pub images_only: bool,
     #[command(flatten)]
     pub link: LinkOptions,
@@ -60,6 +64,9 @@ fn apply_aiding(ds: &mut Dataset, args: &Args) -> Result<()> {
     }
     if let Some(p) = &args.gnss {
         ds.gnss = aiding::read_gnss(p)?;
+    }
+    if let Some(p) = &args.gnss_geodetic {
+        ds.gnss = aiding::read_gnss_geodetic(p, &ds.gnss_setup)?;
     }
     if let Some(p) = &args.odometer {
         ds.odometer = aiding::read_odometer(p)?;

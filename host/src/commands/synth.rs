@@ -69,6 +69,24 @@ pub struct Args {
     /// No GNSS fixes in this time span, seconds (repeatable).
     #[arg(long, value_name = "START_S..END_S", value_parser = aiding::parse_span, requires = "gnss")]
     pub gnss_outage: Vec<(f64, f64)>,
+    /// The GNSS antenna in the left camera's frame (x right, y up, z backwards), metres,
+    /// e.g. `0,1.2,0.5`: the fixes are the antenna's, and gnss.toml states the lever arm.
+    #[arg(
+        long,
+        value_name = "X,Y,Z",
+        value_parser = numbers::<3>,
+        requires = "gnss"
+    )]
+    pub gnss_lever_arm: Option<[f64; 3]>,
+    /// Write the fixes as gnss_geodetic.txt (WGS84), the object frame's origin at
+    /// LAT,LON (deg), H (m) with +Y at HEADING (deg from north), stated in gnss.toml.
+    #[arg(
+        long,
+        value_name = "LAT,LON,H,HEADING",
+        value_parser = numbers::<4>,
+        requires = "gnss"
+    )]
+    pub gnss_geodetic: Option<[f64; 4]>,
     /// Write odometer.txt: the distance between epochs with this relative sigma
     /// (0.005 = 0.5 %).
     #[arg(long, value_name = "SIGMA")]
@@ -125,6 +143,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         gnss_rate_hz: positive(a.gnss_rate, "gnss-rate")?,
         gnss_outages: a.gnss_outage.clone(),
         odometer_sigma: positive(a.odometer, "odometer")?,
+        lever_arm_m: a.gnss_lever_arm.unwrap_or_default(),
+        geodetic: a.gnss_geodetic,
     };
     let s = generate(&opts)?;
     println!(
@@ -166,4 +186,15 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
             .map_err(|_| format!("{s:?}: {v:?} is not a pixel count"))
     };
     Ok((p(w)?, p(h)?))
+}
+
+/// `N` comma-separated finite numbers.
+fn numbers<const N: usize>(s: &str) -> Result<[f64; N], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|x| x.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+        .collect::<Option<_>>()
+        .ok_or_else(|| format!("`{s}`: expected {N} comma-separated numbers"))?;
+    v.try_into()
+        .map_err(|_| format!("`{s}`: expected {N} comma-separated numbers"))
 }

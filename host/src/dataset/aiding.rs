@@ -7,12 +7,23 @@
 //! - `odometer.txt`: `time_s distance_m sigma_m` per line, the distance
 //!   travelled since the previous line (the first line opens the count).
 //!
+//! - `gnss_geodetic.txt`: `time_s latitude_deg longitude_deg height_m sigma_m` (WGS84,
+//!   ellipsoidal height), converted to the object frame with the `[gnss]` table.
+//!
+//! The `[gnss]` table (of `rig.toml`, or `gnss.toml` beside any layout) places the
+//! object frame on the Earth and the antenna on the rig ([`GnssSetup`]).
+//!
 //! Times are on the clock of `times.txt`. Empty lines and `#` comments are skipped.
 use super::DatasetError;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// File name of a dataset's GNSS fixes.
 pub const GNSS_FILE: &str = "gnss.txt";
+/// File name of a dataset's geodetic GNSS fixes.
+pub const GNSS_GEODETIC_FILE: &str = "gnss_geodetic.txt";
+/// File name of the `[gnss]` table of a dataset without `rig.toml`.
+pub const GNSS_SETUP_FILE: &str = "gnss.toml";
 /// File name of a dataset's odometer distances.
 pub const ODOMETER_FILE: &str = "odometer.txt";
 /// A fix within this time of an epoch is used as it is, s.
@@ -32,6 +43,110 @@ pub struct GnssFix {
     pub sigma: f64,
 }
 
+/// Where the object frame is on the Earth, and where the GNSS antenna is on the rig:
+/// the `[gnss]` table.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GnssSetup {
+    /// WGS84 position of the object frame's origin: latitude, longitude (degrees) and
+    /// ellipsoidal height (m). Needed for geodetic fixes only.
+    #[serde(default)]
+    pub origin: Option<[f64; 3]>,
+    /// Azimuth of the object frame's +Y axis (forward at the datum), degrees clockwise
+    /// from north. The object frame's Z is the local vertical (up).
+    #[serde(default)]
+    pub heading_deg: f64,
+    /// The antenna seen from the left perspective centre in the left camera's frame
+    /// (x right, y up, z backwards: towards the back of the vehicle), m.
+    #[serde(default)]
+    pub lever_arm_m: [f64; 3],
+}
+
+/// `gnss.toml`: a file holding the `[gnss]` table.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GnssSetupFile {
+    gnss: GnssSetup,
+}
+
+impl GnssSetup {
+    /// Checks the values; `path` names the file in errors.
+    pub fn validated(self, path: &Path) -> Result<Self, DatasetError> {
+        let bad = |problem: &str| DatasetError::RigFile {
+            path: path.to_path_buf(),
+            problem: format!("[gnss]: {problem}"),
+        };
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        if !finite(&self.lever_arm_m) || !self.heading_deg.is_finite() {
+            return Err(bad("lever_arm_m and heading_deg must be finite"));
+        }
+        if let Some([lat, lon, h]) = self.origin {
+            if !finite(&[lat, lon, h]) || lat.abs() > 90.0 || lon.abs() > 360.0 {
+                return Err(bad(
+                    "origin must be [latitude_deg (-90..90), longitude_deg, height_m]",
+                ));
+            }
+        }
+        Ok(self)
+    }
+
+    /// Reads `gnss.toml`.
+    pub fn read(path: &Path) -> Result<Self, DatasetError> {
+        let text = std::fs::read_to_string(path).map_err(|source| DatasetError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let file: GnssSetupFile = toml::from_str(&text).map_err(|e| DatasetError::RigFile {
+            path: path.to_path_buf(),
+            problem: e.to_string().lines().collect::<Vec<_>>().join(" | "),
+        })?;
+        file.gnss.validated(path)
+    }
+
+    /// Object-frame coordinates of a WGS84 position (degrees, degrees, m): east, north
+    /// and up at the origin, turned by the heading (`X = E cos h - N sin h`,
+    /// `Y = E sin h + N cos h`, `Z = U`). `None` without an origin.
+    pub fn to_object(&self, lat_deg: f64, lon_deg: f64, height_m: f64) -> Option<[f64; 3]> {
+        let [lat0, lon0, h0] = self.origin?;
+        let (e, n, u) = map_3d::geodetic2enu(
+            lat_deg.to_radians(),
+            lon_deg.to_radians(),
+            height_m,
+            lat0.to_radians(),
+            lon0.to_radians(),
+            h0,
+            map_3d::Ellipsoid::WGS84,
+        );
+        let (sh, ch) = self.heading_deg.to_radians().sin_cos();
+        Some([e * ch - n * sh, e * sh + n * ch, u])
+    }
+}
+
+/// Reads `gnss_geodetic.txt` and converts its fixes to the object frame with `setup`.
+pub fn read_gnss_geodetic(path: &Path, setup: &GnssSetup) -> Result<Vec<GnssFix>, DatasetError> {
+    let fixes = read_fixes(path, "time_s latitude_deg longitude_deg height_m sigma_m")?;
+    if setup.origin.is_none() && !fixes.is_empty() {
+        return Err(DatasetError::AidingLine {
+            path: path.to_path_buf(),
+            line: 1,
+            problem: "geodetic fixes need the object frame's origin: `origin = [latitude_deg, \
+                      longitude_deg, height_m]` and `heading_deg` in the [gnss] table of \
+                      rig.toml or gnss.toml"
+                .into(),
+        });
+    }
+    Ok(fixes
+        .into_iter()
+        .filter_map(|f| {
+            let [lat, lon, h] = f.position;
+            Some(GnssFix {
+                position: setup.to_object(lat, lon, h)?,
+                ..f
+            })
+        })
+        .collect())
+}
+
 /// One odometer reading.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct OdometerReading {
@@ -44,7 +159,12 @@ pub struct OdometerReading {
 
 /// Reads `gnss.txt`.
 pub fn read_gnss(path: &Path) -> Result<Vec<GnssFix>, DatasetError> {
-    let rows = read_rows::<5>(path, "time_s X_m Y_m Z_m sigma_m")?;
+    read_fixes(path, "time_s X_m Y_m Z_m sigma_m")
+}
+
+/// Fixes of `path`, whose lines are `format` (a time, three coordinates, a sigma).
+fn read_fixes(path: &Path, format: &str) -> Result<Vec<GnssFix>, DatasetError> {
+    let rows = read_rows::<5>(path, format)?;
     let mut fixes = Vec::with_capacity(rows.len());
     for (line, v) in rows {
         let bad = |problem: String| DatasetError::AidingLine {
@@ -269,6 +389,28 @@ mod tests {
         assert!(gnss_at(&fixes, 1.5).is_none());
         let kept = withhold(&fixes, &[(0.05, 0.25)]);
         assert_eq!(kept.len(), 2);
+    }
+
+    #[test]
+    fn geodetic_fixes_land_in_the_object_frame() {
+        let setup = GnssSetup {
+            origin: Some([48.0, 11.0, 500.0]),
+            heading_deg: 90.0,
+            lever_arm_m: [0.0; 3],
+        };
+        // 100 m north of the origin, 2 m up: with +Y pointing east, north is -X.
+        let lat = 48.0 + 100.0 / 111_200.0;
+        let p = setup.to_object(lat, 11.0, 502.0).unwrap();
+        assert!((p[0] + 100.0).abs() < 0.5 && p[1].abs() < 1e-6, "{p:?}");
+        assert!((p[2] - 2.0).abs() < 0.01, "{p:?}");
+        assert!(GnssSetup::default().to_object(lat, 11.0, 0.0).is_none());
+        let p = write("gnss_geodetic.txt", "0 48 11 500 0.02\n");
+        let e = read_gnss_geodetic(&p, &GnssSetup::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("origin"), "{e}");
+        let f = read_gnss_geodetic(&p, &setup).unwrap();
+        assert!(f[0].position.iter().all(|v| v.abs() < 1e-6), "{:?}", f[0]);
     }
 
     #[test]

@@ -67,8 +67,11 @@ pub struct Dataset {
     pub epochs: Vec<Epoch>,
     /// Ground truth (`gt_poses.txt`), one pose per epoch.
     pub ground_truth: Option<Vec<KittiPose>>,
-    /// GNSS fixes (`gnss.txt`), in time order; empty without the file.
+    /// GNSS fixes (`gnss.txt`, or `gnss_geodetic.txt` converted), in time order; empty
+    /// without either file.
     pub gnss: Vec<aiding::GnssFix>,
+    /// The `[gnss]` table (rig.toml or gnss.toml): georeference and lever arm.
+    pub gnss_setup: aiding::GnssSetup,
     /// Odometer readings (`odometer.txt`), in time order; empty without the file.
     pub odometer: Vec<aiding::OdometerReading>,
 }
@@ -108,6 +111,7 @@ impl Dataset {
             rig,
             datum: default_datum(),
             precision: kitti::CALIBRATION_PRECISION,
+            gnss: None,
         };
         Self::finish(dir, Layout::Kitti, file, pairs)
     }
@@ -168,9 +172,31 @@ impl Dataset {
             None
         };
         let optional = |name: &str| Some(dir.join(name)).filter(|p| p.is_file());
-        let gnss = match optional(aiding::GNSS_FILE) {
-            Some(p) => aiding::read_gnss(&p)?,
-            None => Vec::new(),
+        let gnss_setup = match (file.gnss, optional(aiding::GNSS_SETUP_FILE)) {
+            (Some(_), Some(p)) => {
+                return Err(DatasetError::RigFile {
+                    path: p,
+                    problem: "the [gnss] table is in rig.toml too: keep one".into(),
+                })
+            }
+            (Some(g), None) => g,
+            (None, Some(p)) => aiding::GnssSetup::read(&p)?,
+            (None, None) => aiding::GnssSetup::default(),
+        };
+        let gnss = match (
+            optional(aiding::GNSS_FILE),
+            optional(aiding::GNSS_GEODETIC_FILE),
+        ) {
+            (Some(p), Some(_)) => {
+                return Err(DatasetError::AidingLine {
+                    path: p,
+                    line: 0,
+                    problem: format!("{} is there too: keep one", aiding::GNSS_GEODETIC_FILE),
+                })
+            }
+            (Some(p), None) => aiding::read_gnss(&p)?,
+            (None, Some(p)) => aiding::read_gnss_geodetic(&p, &gnss_setup)?,
+            (None, None) => Vec::new(),
         };
         let odometer = match optional(aiding::ODOMETER_FILE) {
             Some(p) => aiding::read_odometer(&p)?,
@@ -195,6 +221,7 @@ impl Dataset {
             epochs,
             ground_truth,
             gnss,
+            gnss_setup,
             odometer,
         })
     }

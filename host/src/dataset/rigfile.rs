@@ -1,5 +1,6 @@
 //! The photogrammetric rig file `rig.toml` (docs/conventions.md, "Dataset layouts"):
 //! reading with clear errors and writing.
+use super::aiding::GnssSetup;
 use super::DatasetError;
 use phototraverse_core::camera::{Interior, Pose, Rig};
 use phototraverse_core::traverse::CalibrationPrecision;
@@ -70,14 +71,19 @@ struct RigToml {
     datum: Option<DatumToml>,
     #[serde(skip_serializing_if = "Option::is_none")]
     precision: Option<PrecisionToml>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    gnss: Option<GnssSetup>,
 }
 
-/// What `rig.toml` states: the rig, the datum and the calibration's precision.
+/// What `rig.toml` states: the rig, the datum, the calibration's precision and the
+/// GNSS setup.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RigFile {
     pub rig: Rig,
     pub datum: Pose,
     pub precision: CalibrationPrecision,
+    /// The `[gnss]` table, when stated.
+    pub gnss: Option<GnssSetup>,
 }
 
 /// The default datum: a level camera looking along +Y at the origin.
@@ -210,10 +216,12 @@ pub fn parse_rig_file(text: &str, path: &Path) -> Result<RigFile, DatasetError> 
             c
         }
     };
+    let gnss = file.gnss.map(|g| g.validated(path)).transpose()?;
     Ok(RigFile {
         rig,
         datum,
         precision,
+        gnss,
     })
 }
 
@@ -255,6 +263,7 @@ pub fn rig_toml_text(rig: &Rig, datum: &Pose) -> String {
             position_m: datum.centre,
         }),
         precision: None,
+        gnss: None,
     };
     let body = toml::to_string(&file).unwrap_or_default();
     format!("# phototraverse rig file (docs/conventions.md, Dataset layouts)\n{body}")

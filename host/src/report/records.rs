@@ -112,6 +112,36 @@ pub struct EpochRecord {
     pub velocity: Option<VelocityRecord>,
 }
 
+impl EpochRecord {
+    /// An epoch with its poses and nothing measured yet (no adjustment, no counts).
+    pub fn posed(
+        epoch: usize,
+        time: Option<f64>,
+        status: EpochStatus,
+        (left, right): (CameraEop, CameraEop),
+    ) -> Self {
+        EpochRecord {
+            epoch,
+            time,
+            status,
+            note: None,
+            left,
+            right,
+            sigma0: None,
+            chi2_passed: None,
+            chi2: None,
+            observations: 0,
+            tie_points: 0,
+            keypoints: [0; 2],
+            stereo_matches: 0,
+            stage_ms: Default::default(),
+            gnss: None,
+            odometer_m: None,
+            velocity: None,
+        }
+    }
+}
+
 /// A GNSS fix an epoch was adjusted with.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct GnssRecord {

@@ -63,25 +63,7 @@ mod tests {
             z: 0.0,
             sigma,
         };
-        EpochRecord {
-            epoch: k,
-            time: Some(t),
-            status: EpochStatus::Ok,
-            note: None,
-            left: eop,
-            right: eop,
-            sigma0: None,
-            chi2_passed: None,
-            chi2: None,
-            observations: 0,
-            tie_points: 0,
-            keypoints: [0; 2],
-            stereo_matches: 0,
-            stage_ms: Default::default(),
-            gnss: None,
-            odometer_m: None,
-            velocity: None,
-        }
+        EpochRecord::posed(k, Some(t), EpochStatus::Ok, (eop, eop))
     }
 
     #[test]
