@@ -2,7 +2,11 @@
 //!
 //! Central differences `v_k = (C_{k+1} - C_{k-1}) / (t_{k+1} - t_{k-1})` (one-sided at
 //! the ends): the central difference's error from the path's curvature is second
-//! order in the epoch interval, and it averages two steps' scale errors. The speed's
+//! order in the epoch interval, and it averages two steps' scale errors. The traverse's
+//! motion model (the constant-velocity prediction, `traverse::motion`) is the backward
+//! difference of the last two poses: measured against the truth it is worse (per-epoch
+//! speed error 0.28 % against 0.17 % on `seed2006`, 0.53 % against 0.39 % on a 320x240
+//! `drive` with an outage, 0.35 % against 0.25 % on the 1.2 km `drive`). The speed's
 //! standard deviation propagates the two positions' standard deviations along the
 //! direction of motion as if they were independent; consecutive positions of a
 //! traverse are positively correlated, so this is an upper bound.
