@@ -108,6 +108,7 @@ pub fn epoch_result(epoch: u32, out: &traverse::EpochOutput) -> EpochResult {
             // The global test's statistic vTPv, which sigma0^2 is over the redundancy.
             chi2: out.sigma0 * out.sigma0 * out.redundancy as f64,
             redundancy: out.redundancy,
+            relative_sd_m: out.relative_std_m.map_or([0.0; 3], |s| s.map(|v| v as f32)),
         })
     } else {
         Figures::None
@@ -534,6 +535,7 @@ mod tests {
             std: Some([1e-4; 6]),
             sigma0: 0.8,
             redundancy: 500,
+            relative_std_m: Some([0.01; 3]),
             keypoints: [900, 880],
             stereo_matches: 400,
             tie_points: 30,
@@ -585,6 +587,7 @@ mod tests {
                 rms_px: 1.0,
                 chi2: 1.0,
                 redundancy: u32::MAX,
+                relative_sd_m: [1.0; 3],
             }),
             Figures::Sift(SiftCounts {
                 extrema: [u32::MAX; 2],

@@ -344,6 +344,10 @@ impl<'d> Run<'d> {
             gnss: None,
             odometer_m: None,
             velocity: None,
+            relative_sd_m: r
+                .adjustment()
+                .map(|a| a.relative_sd_m.map(f64::from))
+                .filter(|s| s.iter().any(|v| *v > 0.0)),
         }
     }
 

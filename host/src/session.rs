@@ -245,6 +245,7 @@ pub struct AdjustmentRecord {
     pub rms_px: f64,
     pub chi2: f64,
     pub redundancy: u32,
+    pub relative_sd_m: [f32; 3],
 }
 
 /// The feature extractor's figures of a result (left, right).
@@ -670,6 +671,7 @@ impl<T: Transport> Session<T> {
                         rms_px: a.rms_px,
                         chi2: a.chi2,
                         redundancy: a.redundancy,
+                        relative_sd_m: a.relative_sd_m,
                     }),
                     sift: r.sift().map(|s| SiftRecord {
                         extrema: s.extrema,

@@ -1079,6 +1079,20 @@ impl<'a> Window<'a> {
         Some(self.plus_anchor(0, cov))
     }
 
+    /// Standard deviations of slot `i` relative to the recent past (the fixed epochs held
+    /// exact), at no less than their a-priori value, as a fixed epoch keeps them
+    /// ([`Self::leaving_covariance`]): what a difference of neighbouring epochs is
+    /// uncertain by.
+    pub fn epoch_relative_std(&self, i: usize) -> Option<[f64; 6]> {
+        let s = self.epoch_std(i)?;
+        let k = if self.cov_s02 > 0.0 && self.cov_s02 < 1.0 {
+            1.0 / libm::sqrt(self.cov_s02)
+        } else {
+            1.0
+        };
+        Some(s.map(|v| v * k))
+    }
+
     /// Standard deviations of slot `i` with respect to the datum (omega, phi, kappa
     /// rad; X, Y, Z m): [`Self::epoch_absolute_covariance`].
     pub fn epoch_absolute_std(&self, i: usize) -> Option<[f64; 6]> {

@@ -1055,6 +1055,9 @@ pub struct Adjustment {
     pub chi2: f64,
     /// Redundancy of the adjustment: the degrees of freedom of `chi2`.
     pub redundancy: u32,
+    /// Standard deviations of the left perspective centre X, Y, Z (m) relative to the
+    /// recent past (the poses that left the window held exact); 0: not estimated.
+    pub relative_sd_m: [f32; 3],
 }
 
 /// What the feature extractor found in each image (left, right).
@@ -1106,6 +1109,7 @@ impl Figures {
                 rms_px: r.f64()?,
                 chi2: r.f64()?,
                 redundancy: r.u32()?,
+                relative_sd_m: [r.f32()?, r.f32()?, r.f32()?],
             }),
             figures_kind::SIFT => Figures::Sift(SiftCounts {
                 extrema: r.u32s()?,
@@ -1126,7 +1130,8 @@ impl Figures {
             Figures::Adjustment(a) => {
                 w.u8(figures_kind::ADJUSTMENT)?;
                 w.f64s(&[a.sigma0, a.rms_px, a.chi2])?;
-                w.u32(a.redundancy)
+                w.u32(a.redundancy)?;
+                a.relative_sd_m.iter().try_for_each(|v| w.f32(*v))
             }
             Figures::Sift(s) => {
                 w.u8(figures_kind::SIFT)?;

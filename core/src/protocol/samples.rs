@@ -135,6 +135,7 @@ pub fn sample_result() -> EpochResult {
             rms_px: 0.35,
             chi2: 0.81 * 1234.0,
             redundancy: 1234,
+            relative_sd_m: [0.002, 0.004, 0.003],
         }),
         rig: None,
     }

@@ -893,6 +893,10 @@ impl<'a> Traverse<'a> {
             out.right = self.right_of(&pose);
         }
         out.std = self.window.epoch_absolute_std(last);
+        out.relative_std_m = self
+            .window
+            .epoch_relative_std(last)
+            .map(|s| [s[3], s[4], s[5]]);
         out.sigma0 = rep.sigma0;
         out.chi2_passed = rep.chi2.passed;
         out.redundancy = rep.redundancy as u32;

@@ -96,8 +96,13 @@ pub struct EpochOutput {
     /// Left and right camera poses, object frame.
     pub left: Pose,
     pub right: Pose,
-    /// Standard deviations of the left pose (omega, phi, kappa rad; X, Y, Z m).
+    /// Standard deviations of the left pose (omega, phi, kappa rad; X, Y, Z m) with
+    /// respect to the datum ([`crate::adjust::Window::epoch_absolute_std`]).
     pub std: Option<[f64; 6]>,
+    /// Standard deviations of the left perspective centre (X, Y, Z m) with the poses
+    /// that left the window held exact: its precision relative to the recent past, what
+    /// a velocity from neighbouring epochs is uncertain by.
+    pub relative_std_m: Option<[f64; 3]>,
     /// A-posteriori sigma0 of the window adjustment (0 when not adjusted).
     pub sigma0: f64,
     pub chi2_passed: bool,

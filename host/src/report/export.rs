@@ -188,6 +188,7 @@ mod tests {
             gnss: None,
             odometer_m: None,
             velocity: None,
+            relative_sd_m: None,
         };
         let report = RunReport {
             epochs: vec![rec],

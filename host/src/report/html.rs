@@ -550,6 +550,7 @@ mod tests {
                 gnss: None,
                 odometer_m: None,
                 velocity: None,
+                relative_sd_m: None,
             });
         }
         report.ground_truth = Some((0..5).map(|k| [0.0, k as f64, 0.0]).collect());

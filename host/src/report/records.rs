@@ -110,6 +110,11 @@ pub struct EpochRecord {
     /// Velocity of the left perspective centre ([`super::velocity`]).
     #[serde(default)]
     pub velocity: Option<VelocityRecord>,
+    /// Standard deviations of the left centre X, Y, Z relative to the recent past (the
+    /// poses that left the window held exact), m: what a difference of neighbouring
+    /// epochs is uncertain by; `left.sigma` is with respect to the datum.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub relative_sd_m: Option<[f64; 3]>,
 }
 
 impl EpochRecord {
@@ -138,6 +143,7 @@ impl EpochRecord {
             gnss: None,
             odometer_m: None,
             velocity: None,
+            relative_sd_m: None,
         }
     }
 }

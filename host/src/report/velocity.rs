@@ -7,9 +7,10 @@
 //! difference of the last two poses: measured against the truth it is worse (per-epoch
 //! speed error 0.28 % against 0.17 % on `seed2006`, 0.53 % against 0.39 % on a 320x240
 //! `drive` with an outage, 0.35 % against 0.25 % on the 1.2 km `drive`). The speed's
-//! standard deviation propagates the two positions' standard deviations along the
-//! direction of motion as if they were independent; consecutive positions of a
-//! traverse are positively correlated, so this is an upper bound.
+//! standard deviation propagates the two positions' standard deviations relative to the
+//! recent past (`relative_sd_m`; with respect to the datum they hold the whole traverse's
+//! drift, which a difference of neighbours cancels) along the direction of motion, as if
+//! they were independent.
 use super::records::{EpochRecord, VelocityRecord};
 
 /// Velocities of `epochs` (in order, with times), `None` where an epoch or a
@@ -39,10 +40,10 @@ fn velocity(a: &EpochRecord, b: &EpochRecord) -> Option<VelocityRecord> {
     ];
     let v = d.map(|x| x / dt);
     let speed = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    let sd_speed_m_s = a.left.sigma.zip(b.left.sigma).map(|(sa, sb)| {
+    let sd_speed_m_s = a.relative_sd_m.zip(b.relative_sd_m).map(|(sa, sb)| {
         // Variance along the unit direction u of each position: sum u_i^2 s_i^2.
         let u = v.map(|x| if speed > 0.0 { x / speed } else { 0.0 });
-        let along = |s: [f64; 6]| (0..3).map(|i| (u[i] * s[3 + i]).powi(2)).sum::<f64>();
+        let along = |s: [f64; 3]| (0..3).map(|i| (u[i] * s[i]).powi(2)).sum::<f64>();
         (along(sa) + along(sb)).sqrt() / dt
     });
     Some(VelocityRecord {
@@ -57,7 +58,7 @@ mod tests {
     use super::*;
     use crate::report::{CameraEop, EpochStatus};
 
-    fn rec(k: usize, t: f64, y: f64, sigma: Option<[f64; 6]>) -> EpochRecord {
+    fn rec(k: usize, t: f64, y: f64, sigma: Option<[f64; 3]>) -> EpochRecord {
         let eop = CameraEop {
             omega_deg: 90.0,
             phi_deg: 0.0,
@@ -65,14 +66,17 @@ mod tests {
             x: 0.0,
             y,
             z: 0.0,
-            sigma,
+            sigma: None,
         };
-        EpochRecord::posed(k, Some(t), EpochStatus::Ok, (eop, eop))
+        EpochRecord {
+            relative_sd_m: sigma,
+            ..EpochRecord::posed(k, Some(t), EpochStatus::Ok, (eop, eop))
+        }
     }
 
     #[test]
     fn central_differences_with_the_speed_sigma_along_the_motion() {
-        let s = Some([0.0, 0.0, 0.0, 0.5, 0.003, 0.5]);
+        let s = Some([0.5, 0.003, 0.5]);
         let e = [
             rec(0, 0.0, 0.0, s),
             rec(1, 0.5, 1.0, s),
