@@ -184,13 +184,16 @@ impl<'d> Run<'d> {
         self.ds.epochs[i].time.unwrap_or(i as f64)
     }
 
-    /// The GNSS fix and the odometer leg from the previous epoch of epoch `i`, when the
-    /// dataset has them ([`aiding`]).
+    /// The GNSS fix and the odometer's count at epoch `i`, when the dataset has them
+    /// ([`aiding`]).
     fn aux_of(&self, i: usize, time: f64) -> Option<Aux> {
-        let gnss = aiding::gnss_at(&self.ds.gnss, time);
-        let odometer = i
-            .checked_sub(1)
-            .and_then(|p| aiding::odometer_between(&self.ds.odometer, self.time_of(p), time));
+        let outage = self
+            .ds
+            .gnss_outages
+            .iter()
+            .any(|&(a, b)| time >= a && time <= b);
+        let gnss = aiding::gnss_at(&self.ds.gnss, time).filter(|_| !outage);
+        let odometer = aiding::odometer_at(&self.ds.odometer, time);
         if gnss.is_none() && odometer.is_none() {
             return None;
         }
@@ -342,7 +345,7 @@ impl<'d> Run<'d> {
             stereo_matches: r.counts.stereo_matches,
             stage_ms,
             gnss: None,
-            odometer_m: None,
+            odometer_count_m: None,
             velocity: None,
             relative_sd_m: r
                 .adjustment()
@@ -499,7 +502,7 @@ fn note_aux(rec: &mut EpochRecord, aux: Option<Aux>) {
         });
     }
     if a.flags & AUX_ODOMETER != 0 {
-        rec.odometer_m = Some(a.odometer_m);
+        rec.odometer_count_m = Some(a.odometer_m);
     }
 }
 

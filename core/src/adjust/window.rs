@@ -1278,7 +1278,11 @@ impl<'a> Window<'a> {
                 rot,
                 right: right_rotation(&rot, &self.rig_rot),
                 time: e.time,
-                cov: self.leaving_covariance().unwrap_or([0.0; 36]),
+                // Without a covariance of its own (its solve failed) it passes the
+                // anchor's on: the accumulated uncertainty is not lost.
+                cov: self
+                    .leaving_covariance()
+                    .unwrap_or_else(|| self.plus_anchor(0, [0.0; 36])),
             };
             let expired = (self.n_fixed == cap).then(|| gone.wrapping_sub(cap as u32));
             if self.n_fixed == cap {
@@ -1290,6 +1294,13 @@ impl<'a> Window<'a> {
             expired
         };
         let release = aided && had_fixed;
+        // What the past tells about the new first epoch, taken while the fixed epochs
+        // that are about to go still anchor it.
+        let released_info = if release {
+            self.carried_information(1, true)
+        } else {
+            None
+        };
         // Observations in the window per point, after this slide (point_start is
         // scratch until the next build_index).
         let np = self.n_point_slots;
@@ -1307,43 +1318,22 @@ impl<'a> Window<'a> {
             self.n_fixed = 0;
         }
         // Prior of the new first epoch from its marginal covariance.
-        let s02 = self.cov_s02;
+        let aided_info = if aided && released_info.is_none() {
+            self.carried_information(1, false)
+        } else {
+            None
+        };
         let next = &mut self.epochs[1];
         let mut info = [0.0; 36];
-        let have = next.flags & EP_COV != 0 && invert6(&next.cov, &mut info);
-        if have && self.cfg.fixed_epochs > 0 && (had_fixed || !aided) {
-            // The marginal holds the fixed epochs' observations, which stay (or, when
-            // released, held the past exact): weakened.
+        let mut have = next.flags & EP_COV != 0 && invert6(&next.cov, &mut info);
+        if let Some(carried) = released_info.or(aided_info) {
+            // The window's only link to the epochs that left, at full strength.
+            info = carried;
+            have = true;
+        } else if have && self.cfg.fixed_epochs > 0 {
+            // The marginal holds the fixed epochs' observations, which stay: weakened.
             let k = 1.0 / self.cfg.carried_prior_inflation;
             info.iter_mut().for_each(|v| *v *= k);
-        } else if have && aided {
-            // The prior is now the window's only link to the epochs that left, at full
-            // strength, in the a-priori units of the fixes' weights (the covariance is
-            // s02 Q). The epoch's own fix stays in the window: its information, which
-            // the marginal holds exactly, is taken out so it does not count twice.
-            info.iter_mut().for_each(|v| *v *= s02);
-            if next.flags & EP_GNSS != 0 {
-                // J^T W J of the fix: the centre rows are the identity, the angle rows
-                // the lever arm's turn.
-                let w = 1.0 / (next.gnss_sigma * next.gnss_sigma);
-                let (_, ja) = gnss_residual(next);
-                let jrow = |a: usize, k: usize| {
-                    if k < 3 {
-                        ja[a][k]
-                    } else {
-                        f64::from(k - 3 == a)
-                    }
-                };
-                for r in 0..6 {
-                    for c in 0..6 {
-                        let jtj: f64 = (0..3).map(|a| jrow(a, r) * jrow(a, c)).sum();
-                        info[r * 6 + c] -= w * jtj;
-                    }
-                }
-                for a in 0..6 {
-                    info[a * 6 + a] = info[a * 6 + a].max(0.0);
-                }
-            }
         }
         if !have {
             let s = self.cfg.sigmas;
@@ -1437,8 +1427,60 @@ impl<'a> Window<'a> {
         if self.n_fixed == 0 {
             return;
         }
+        // The first epoch's prior, weak while the fixed epochs anchored the window,
+        // becomes what they told about it: its covariance with respect to the datum.
+        if let Some(info) = self.carried_information(0, true) {
+            let e = &mut self.epochs[0];
+            e.prior = e.params;
+            e.prior_info = info;
+            e.flags |= EP_PRIOR;
+        }
         self.retain_observations(|w, o| w.slot_of(o.epoch).is_some());
         self.n_fixed = 0;
+    }
+
+    /// The information of a prior carried on slot `i` when the window is anchored by
+    /// fixes: the slot's covariance in the a-priori units of the fixes' weights (the
+    /// solution's is `sigma0^2 Q`; the prior is `Q^-1`), with the newest fixed epoch's
+    /// absolute covariance added when `with_anchor` (the fixed epochs are about to go),
+    /// less the slot's own fix, which stays in the window (`J^T W J`; kept only if the
+    /// rest is still positive definite). `None` without a covariance.
+    fn carried_information(&self, i: usize, with_anchor: bool) -> Option<[f64; 36]> {
+        let e = &self.epochs[i];
+        if e.flags & EP_COV == 0 || !(self.cov_s02 > 0.0) {
+            return None;
+        }
+        let mut cov = e.cov.map(|v| v / self.cov_s02);
+        if with_anchor {
+            cov = self.plus_anchor(i, cov);
+        }
+        let mut info = [0.0; 36];
+        if !invert6(&cov, &mut info) {
+            return None;
+        }
+        if e.flags & EP_GNSS != 0 {
+            let w = 1.0 / (e.gnss_sigma * e.gnss_sigma);
+            let (_, ja) = gnss_residual(e);
+            let jrow = |a: usize, k: usize| {
+                if k < 3 {
+                    ja[a][k]
+                } else {
+                    f64::from(k - 3 == a)
+                }
+            };
+            let mut less = info;
+            for r in 0..6 {
+                for c in 0..6 {
+                    let jtj: f64 = (0..3).map(|a| jrow(a, r) * jrow(a, c)).sum();
+                    less[r * 6 + c] -= w * jtj;
+                }
+            }
+            let mut check = [0.0; 36];
+            if invert6(&less, &mut check) {
+                info = less;
+            }
+        }
+        Some(info)
     }
 
     /// Moves the local origin by `shift` (local coordinates).
@@ -2856,7 +2898,6 @@ fn carry_prior(
     }
 }
 
-/// Inverts a symmetric positive definite 6x6 (row-major); false when not SPD.
 /// The GNSS residual `C + M^T l - G` of an epoch (local coordinates) and its
 /// derivatives with respect to the angles (`[coordinate][angle]`; the centre's are 1).
 /// Uses the epoch's cached rotation.
@@ -2917,6 +2958,7 @@ fn angle_rates(p: &[f64; 6]) -> Matrix3<f64> {
     e
 }
 
+/// Inverts a symmetric positive definite 6x6 (row-major); false when not SPD.
 fn invert6(a: &[f64; 36], out: &mut [f64; 36]) -> bool {
     let mut m = *a;
     if cholesky::factor(&mut m, 6, cholesky::PIVOT_REL_TOL).is_err() {
@@ -3219,6 +3261,15 @@ mod tests {
             e.gnss_lever = [0.3, 1.1, -0.7];
             e
         };
+        // The default datum (omega 90 deg: the camera's y is the object's Z, its z the
+        // object's -Y): an antenna 1.2 m up and 0.5 m behind the camera.
+        let mut level = slot([core::f64::consts::FRAC_PI_2, 0.0, 0.0, 1.0, 2.0, 3.0]);
+        level.gnss_lever = [0.0, 1.2, 0.5];
+        let (r, _) = gnss_residual(&level);
+        assert!(
+            r[0].abs() < 1e-12 && (r[1] + 0.5).abs() < 1e-12 && (r[2] - 1.2).abs() < 1e-12,
+            "{r:?}"
+        );
         let p = [1.55, 0.2, -0.4, 1.0, 2.5, 2.0];
         let (r0, j) = gnss_residual(&slot(p));
         // At zero lever the residual is the centre's offset from the fix.

@@ -864,7 +864,8 @@ pub struct Aux {
     pub epoch: u32,
     /// Bit 0: odometer valid, bit 1: GNSS valid.
     pub flags: u8,
-    /// Distance travelled since the previous epoch, m, and its sigma.
+    /// The odometer's count at the epoch (distance travelled since it started), m, and
+    /// its sigma: the traverse differences the counts of consecutive window epochs.
     pub odometer_m: f64,
     pub odometer_sigma_m: f64,
     /// GNSS position in the object frame, m, and its sigmas.

@@ -138,7 +138,9 @@ impl core::fmt::Display for TraverseError {
 /// Auxiliary observations of an epoch, when the vehicle has them.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct AuxObservations {
-    /// Distance travelled since the previous epoch and its sigma, metres.
+    /// The odometer's count at the epoch: the distance travelled since it started and
+    /// its sigma, metres. The window takes the leg from the previous epoch it holds, so
+    /// an epoch that never entered it (a refused image, a repeated frame) costs no leg.
     pub odometer: Option<(f64, f64)>,
     /// A GNSS fix.
     pub gnss: Option<GnssFix>,
@@ -197,6 +199,8 @@ pub struct Traverse<'a> {
     calibration_corrections: u32,
     /// Consecutive epochs whose calibration test rejected the calibration.
     calibration_rejections: u32,
+    /// The odometer count (distance, variance) of the newest window epoch, if it had one.
+    odometer_count: Option<(f64, f64)>,
 }
 
 impl<'a> Traverse<'a> {
@@ -247,6 +251,7 @@ impl<'a> Traverse<'a> {
             last_solve_error: None,
             calibration_corrections: 0,
             calibration_rejections: 0,
+            odometer_count: None,
         })
     }
 
@@ -650,9 +655,11 @@ impl<'a> Traverse<'a> {
         };
         self.window_inputs[self.window.n_epochs() - 1] = k;
         // Invalid auxiliary values (NaN, sigma <= 0) are refused by the window and ignored.
-        if let Some((d, s)) = aux.odometer {
-            let _ = self.window.set_odometer(id, d, s);
+        let count = aux.odometer.map(|(d, s)| (d, s * s));
+        if let (Some((d0, v0)), Some((d1, v1))) = (self.odometer_count, count) {
+            let _ = self.window.set_odometer(id, d1 - d0, libm::sqrt(v1 - v0));
         }
+        self.odometer_count = count;
         if let Some(g) = aux.gnss {
             let _ = self
                 .window

@@ -73,6 +73,7 @@ fn apply_aiding(ds: &mut Dataset, args: &Args) -> Result<()> {
     }
     let all = ds.gnss.len();
     ds.gnss = aiding::withhold(&ds.gnss, &args.gnss_outage);
+    ds.gnss_outages = args.gnss_outage.clone();
     let span = ds.epochs.first().zip(ds.epochs.last());
     let (t0, t1) = span.map_or((0.0, 0.0), |(a, b)| {
         (

@@ -2,8 +2,9 @@
 //! distances (`odometer.txt`), and how they are tied to the epochs
 //! (docs/datasets.md, "GNSS and odometer").
 //!
-//! - `gnss.txt`: `time_s X_m Y_m Z_m sigma_m` per line, the left camera's
-//!   perspective centre in the traverse's object frame (that of `eop.csv`).
+//! - `gnss.txt`: `time_s X_m Y_m Z_m sigma_m` per line, the antenna's position in the
+//!   traverse's object frame (that of `eop.csv`): the left perspective centre's unless
+//!   the `[gnss]` table gives a lever arm.
 //! - `odometer.txt`: `time_s distance_m sigma_m` per line, the distance
 //!   travelled since the previous line (the first line opens the count).
 //!
@@ -37,7 +38,8 @@ pub const GNSS_MAX_INTERPOLATION_S: f64 = 0.2;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GnssFix {
     pub time: f64,
-    /// The left perspective centre in the object frame, m.
+    /// The antenna in the object frame (the left perspective centre without a lever
+    /// arm), m.
     pub position: [f64; 3],
     /// Standard deviation of each coordinate, m.
     pub sigma: f64,
@@ -52,8 +54,8 @@ pub struct GnssSetup {
     /// ellipsoidal height (m). Needed for geodetic fixes only.
     #[serde(default)]
     pub origin: Option<[f64; 3]>,
-    /// Azimuth of the object frame's +Y axis (forward at the datum), degrees clockwise
-    /// from north. The object frame's Z is the local vertical (up).
+    /// Azimuth of the object frame's +Y axis, degrees clockwise from north. The object
+    /// frame's Z is the local vertical (up).
     #[serde(default)]
     pub heading_deg: f64,
     /// The antenna seen from the left perspective centre in the left camera's frame
@@ -308,14 +310,12 @@ pub fn gnss_at(fixes: &[GnssFix], t: f64) -> Option<([f64; 3], f64)> {
     Some((p, a.sigma.max(b.sigma)))
 }
 
-/// The distance travelled from `t0` to `t1` and its sigma, when the readings span
-/// both times: the cumulative distance (and variance) interpolated linearly in time
-/// between readings. `readings` in time order.
-pub fn odometer_between(readings: &[OdometerReading], t0: f64, t1: f64) -> Option<(f64, f64)> {
-    let (d0, v0) = cumulative(readings, t0)?;
-    let (d1, v1) = cumulative(readings, t1)?;
-    let var = v1 - v0;
-    (t1 > t0 && var > 0.0).then(|| (d1 - d0, var.sqrt()))
+/// The odometer's count at time `t`: the distance travelled since the first reading
+/// and its sigma, interpolated linearly in time between readings (distance and
+/// variance), when the readings span `t`. The traverse differences the counts of
+/// consecutive window epochs. `readings` in time order.
+pub fn odometer_at(readings: &[OdometerReading], t: f64) -> Option<(f64, f64)> {
+    cumulative(readings, t).map(|(d, v)| (d, v.sqrt()))
 }
 
 /// Distance and variance accumulated from the first reading to time `t`.
@@ -421,11 +421,16 @@ mod tests {
             sigma: 0.01,
         };
         let readings = [r(0.0, 0.0), r(1.0, 2.0), r(2.0, 2.0), r(3.0, 4.0)];
-        let (d, s) = odometer_between(&readings, 1.0, 3.0).unwrap();
+        let leg = |t0: f64, t1: f64| {
+            let ((d0, s0), (d1, s1)) = (odometer_at(&readings, t0)?, odometer_at(&readings, t1)?);
+            Some((d1 - d0, (s1 * s1 - s0 * s0).sqrt()))
+        };
+        let (d, s) = leg(1.0, 3.0).unwrap();
         assert!((d - 6.0).abs() < 1e-12);
         assert!((s - (2.0f64 * 1e-4).sqrt()).abs() < 1e-12);
-        let (d, _) = odometer_between(&readings, 0.5, 1.5).unwrap();
+        let (d, _) = leg(0.5, 1.5).unwrap();
         assert!((d - 2.0).abs() < 1e-12);
-        assert!(odometer_between(&readings, 2.0, 3.5).is_none());
+        assert!(odometer_at(&readings, 3.5).is_none());
+        assert_eq!(odometer_at(&readings, 0.0), Some((0.0, 0.0)));
     }
 }

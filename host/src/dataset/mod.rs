@@ -72,6 +72,8 @@ pub struct Dataset {
     pub gnss: Vec<aiding::GnssFix>,
     /// The `[gnss]` table (rig.toml or gnss.toml): georeference and lever arm.
     pub gnss_setup: aiding::GnssSetup,
+    /// Time spans without GNSS (`run --gnss-outage`): no fix, not even interpolated.
+    pub gnss_outages: Vec<(f64, f64)>,
     /// Odometer readings (`odometer.txt`), in time order; empty without the file.
     pub odometer: Vec<aiding::OdometerReading>,
 }
@@ -222,6 +224,7 @@ impl Dataset {
             ground_truth,
             gnss,
             gnss_setup,
+            gnss_outages: Vec::new(),
             odometer,
         })
     }

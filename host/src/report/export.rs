@@ -186,7 +186,7 @@ mod tests {
             stereo_matches: 500,
             stage_ms: Default::default(),
             gnss: None,
-            odometer_m: None,
+            odometer_count_m: None,
             velocity: None,
             relative_sd_m: None,
         };

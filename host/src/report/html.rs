@@ -548,7 +548,7 @@ mod tests {
                 stereo_matches: 500,
                 stage_ms: [("features".to_string(), 10.0), ("adjust".to_string(), 2.0)].into(),
                 gnss: None,
-                odometer_m: None,
+                odometer_count_m: None,
                 velocity: None,
                 relative_sd_m: None,
             });

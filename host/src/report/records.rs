@@ -104,9 +104,9 @@ pub struct EpochRecord {
     /// The GNSS fix sent with the epoch, and the adjusted position's residual to it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gnss: Option<GnssRecord>,
-    /// The odometer distance from the previous epoch sent with the epoch, m.
+    /// The odometer's count sent with the epoch (distance since its first reading), m.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub odometer_m: Option<f64>,
+    pub odometer_count_m: Option<f64>,
     /// Velocity of the left perspective centre ([`super::velocity`]).
     #[serde(default)]
     pub velocity: Option<VelocityRecord>,
@@ -141,7 +141,7 @@ impl EpochRecord {
             stereo_matches: 0,
             stage_ms: Default::default(),
             gnss: None,
-            odometer_m: None,
+            odometer_count_m: None,
             velocity: None,
             relative_sd_m: None,
         }

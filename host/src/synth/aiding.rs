@@ -113,7 +113,8 @@ pub fn write_aiding(
             let c = centre(t);
             let d = ((0..3).map(|a| (c[a] - prev[a]).powi(2)).sum::<f64>()).sqrt();
             let s = (rel * d).max(1e-6);
-            let measured = d + s * gaussian(&mut rng);
+            // A distance is never negative, however large the sigma asked for.
+            let measured = (d + s * gaussian(&mut rng)).max(0.0);
             let _ = writeln!(text, "{t:.6} {measured:.5} {s:.6}");
             prev = c;
         }
