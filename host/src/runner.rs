@@ -179,19 +179,10 @@ impl<'d> Run<'d> {
         })
     }
 
-    fn time_of(&self, i: usize) -> f64 {
-        // Without times.txt an epoch is one second: the prediction only needs ratios.
-        self.ds.epochs[i].time.unwrap_or(i as f64)
-    }
-
     /// The GNSS fix and the odometer's count at epoch `i`, when the dataset has them
     /// ([`aiding`]).
     fn aux_of(&self, i: usize, time: f64) -> Option<Aux> {
-        let outage = self
-            .ds
-            .gnss_outages
-            .iter()
-            .any(|&(a, b)| time >= a && time <= b);
+        let outage = aiding::within(&self.ds.gnss_outages, time);
         let gnss = aiding::gnss_at(&self.ds.gnss, time).filter(|_| !outage);
         let odometer = aiding::odometer_at(&self.ds.odometer, time);
         if gnss.is_none() && odometer.is_none() {
@@ -216,7 +207,7 @@ impl<'d> Run<'d> {
         session: &mut Session<T>,
         i: usize,
     ) -> Result<()> {
-        let time = self.time_of(i);
+        let time = self.ds.time_of(i);
         let record = match self.ds.load_pair(i) {
             Ok((left, right)) => {
                 let timestamp_us = (time * 1e6).max(0.0) as u64;
@@ -492,9 +483,7 @@ impl<'d> Run<'d> {
 fn note_aux(rec: &mut EpochRecord, aux: Option<Aux>) {
     let Some(a) = aux else { return };
     if a.flags & AUX_GNSS != 0 {
-        let pose = rec.left.to_pose();
-        let lever = pose.rotation().transpose() * nalgebra::Vector3::from(a.gnss_lever_arm_m);
-        let antenna = [0, 1, 2].map(|k| pose.centre[k] + lever[k]);
+        let antenna = aiding::antenna_position(&rec.left.to_pose(), a.gnss_lever_arm_m);
         rec.gnss = Some(GnssRecord {
             position: a.gnss_m,
             sigma_m: a.gnss_sigma_m[0],

@@ -18,23 +18,33 @@ const OUTAGE: (f64, f64) = (4.0, 7.0);
 const MAX_RMS_OUTSIDE_M: f64 = 0.035;
 const MAX_ERROR_INSIDE_M: f64 = 0.2;
 
+/// The run's report.json.
+fn report(out: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(out.join("report.json")).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+/// The report's true left centres, one per epoch.
+fn ground_truth(report: &serde_json::Value) -> Vec<[f64; 3]> {
+    report["ground_truth"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| [0, 1, 2].map(|k| p[k].as_f64().unwrap()))
+        .collect()
+}
+
 /// Per epoch: time, position error (m), whether it is within 3 sd on every coordinate.
 fn centre_errors(out: &Path) -> Vec<(f64, f64, bool)> {
-    let text = std::fs::read_to_string(out.join("report.json")).unwrap();
-    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
-    let gt = v["ground_truth"].as_array().unwrap();
+    let v = report(out);
+    let gt = ground_truth(&v);
     v["epochs"]
         .as_array()
         .unwrap()
         .iter()
         .map(|e| {
             let l = &e["left"];
-            let g: Vec<f64> = gt[e["epoch"].as_u64().unwrap() as usize]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|x| x.as_f64().unwrap())
-                .collect();
+            let g = gt[e["epoch"].as_u64().unwrap() as usize];
             let d = [
                 l["x"].as_f64().unwrap() - g[0],
                 l["y"].as_f64().unwrap() - g[1],
@@ -100,21 +110,9 @@ fn the_images_bridge_an_outage_over_a_turn() {
     // The fixes are in the report where they were sent, with residuals, and every
     // epoch's speed in eop.csv is the true one (central differences of the true centres;
     // in the turn the camera, right of the centre line, runs 5 % faster than 2 m/epoch).
-    let report = std::fs::read_to_string(out.join("report.json")).unwrap();
-    assert_eq!(report.matches("\"residual_m\"").count(), rows.len() - n_in);
-    let v: serde_json::Value = serde_json::from_str(&report).unwrap();
-    let gt: Vec<Vec<f64>> = v["ground_truth"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|p| {
-            p.as_array()
-                .unwrap()
-                .iter()
-                .map(|x| x.as_f64().unwrap())
-                .collect()
-        })
-        .collect();
+    let text = std::fs::read_to_string(out.join("report.json")).unwrap();
+    assert_eq!(text.matches("\"residual_m\"").count(), rows.len() - n_in);
+    let gt = ground_truth(&serde_json::from_str(&text).unwrap());
     let eop = std::fs::read_to_string(out.join("eop.csv")).unwrap();
     let header: Vec<&str> = eop.lines().next().unwrap().split(',').collect();
     let speed = header.iter().position(|h| *h == "speed_m_s").unwrap();

@@ -1071,12 +1071,19 @@ impl<'a> Window<'a> {
     /// optimistic. Only the step's own part is scaled: the anchor's was, at its slide
     /// (scaling the sum compounded the scale at every slide).
     fn leaving_covariance(&self) -> Option<[f64; 36]> {
-        let mut cov = self.epoch_covariance(0)?;
-        if self.cov_s02 > 0.0 && self.cov_s02 < 1.0 {
-            let k = 1.0 / self.cov_s02;
-            cov.iter_mut().for_each(|v| *v *= k);
-        }
+        let k = self.apriori_floor();
+        let cov = self.epoch_covariance(0)?.map(|v| v * k);
         Some(self.plus_anchor(0, cov))
+    }
+
+    /// The factor that raises the last solution's covariances to no less than their
+    /// a-priori value: `1 / sigma0^2` when sigma0 is below 1, else 1.
+    fn apriori_floor(&self) -> f64 {
+        if self.cov_s02 > 0.0 && self.cov_s02 < 1.0 {
+            1.0 / self.cov_s02
+        } else {
+            1.0
+        }
     }
 
     /// Standard deviations of slot `i` relative to the recent past (the fixed epochs held
@@ -1084,13 +1091,8 @@ impl<'a> Window<'a> {
     /// ([`Self::leaving_covariance`]): what a difference of neighbouring epochs is
     /// uncertain by.
     pub fn epoch_relative_std(&self, i: usize) -> Option<[f64; 6]> {
-        let s = self.epoch_std(i)?;
-        let k = if self.cov_s02 > 0.0 && self.cov_s02 < 1.0 {
-            1.0 / libm::sqrt(self.cov_s02)
-        } else {
-            1.0
-        };
-        Some(s.map(|v| v * k))
+        let k = libm::sqrt(self.apriori_floor());
+        Some(self.epoch_std(i)?.map(|v| v * k))
     }
 
     /// Standard deviations of slot `i` with respect to the datum (omega, phi, kappa
@@ -1325,16 +1327,23 @@ impl<'a> Window<'a> {
         };
         let next = &mut self.epochs[1];
         let mut info = [0.0; 36];
-        let mut have = next.flags & EP_COV != 0 && invert6(&next.cov, &mut info);
-        if let Some(carried) = released_info.or(aided_info) {
+        let have = match released_info.or(aided_info) {
             // The window's only link to the epochs that left, at full strength.
-            info = carried;
-            have = true;
-        } else if have && self.cfg.fixed_epochs > 0 {
-            // The marginal holds the fixed epochs' observations, which stay: weakened.
-            let k = 1.0 / self.cfg.carried_prior_inflation;
-            info.iter_mut().for_each(|v| *v *= k);
-        }
+            Some(carried) => {
+                info = carried;
+                true
+            }
+            None => {
+                let have = next.flags & EP_COV != 0 && invert6(&next.cov, &mut info);
+                if have && self.cfg.fixed_epochs > 0 {
+                    // The marginal holds the fixed epochs' observations, which stay:
+                    // weakened.
+                    let k = 1.0 / self.cfg.carried_prior_inflation;
+                    info.iter_mut().for_each(|v| *v *= k);
+                }
+                have
+            }
+        };
         if !have {
             let s = self.cfg.sigmas;
             for i in 0..6 {
@@ -1460,18 +1469,11 @@ impl<'a> Window<'a> {
         }
         if e.flags & EP_GNSS != 0 {
             let w = 1.0 / (e.gnss_sigma * e.gnss_sigma);
-            let (_, ja) = gnss_residual(e);
-            let jrow = |a: usize, k: usize| {
-                if k < 3 {
-                    ja[a][k]
-                } else {
-                    f64::from(k - 3 == a)
-                }
-            };
+            let (_, j) = gnss_residual(e);
             let mut less = info;
             for r in 0..6 {
                 for c in 0..6 {
-                    let jtj: f64 = (0..3).map(|a| jrow(a, r) * jrow(a, c)).sum();
+                    let jtj: f64 = (0..3).map(|a| j[a][r] * j[a][c]).sum();
                     less[r * 6 + c] -= w * jtj;
                 }
             }
@@ -2040,7 +2042,9 @@ impl<'a> Window<'a> {
                 let w = 1.0 / (ep.gnss_sigma * ep.gnss_sigma);
                 let (r, j) = gnss_residual(&ep);
                 for a in 0..3 {
-                    let mut row = [(6 * e + 3 + a, 1.0); 4];
+                    // The centre's own column and the three angles (the other centre
+                    // columns are zero).
+                    let mut row = [(6 * e + 3 + a, j[a][3 + a]); 4];
                     for k in 0..3 {
                         row[k + 1] = (6 * e + k, j[a][k]);
                     }
@@ -2899,9 +2903,9 @@ fn carry_prior(
 }
 
 /// The GNSS residual `C + M^T l - G` of an epoch (local coordinates) and its
-/// derivatives with respect to the angles (`[coordinate][angle]`; the centre's are 1).
-/// Uses the epoch's cached rotation.
-fn gnss_residual(ep: &EpochSlot) -> ([f64; 3], [[f64; 3]; 3]) {
+/// Jacobian with respect to the pose (`[coordinate][omega, phi, kappa, X, Y, Z]`: the
+/// lever arm's turn, then the identity). Uses the epoch's cached rotation.
+fn gnss_residual(ep: &EpochSlot) -> ([f64; 3], [[f64; 6]; 3]) {
     let l = ep.gnss_lever;
     // Rotations hold M and its derivatives column-major: (M^T l)_a = sum_i M[i][a] l_i.
     let mt_l = |m: &[f64]| -> [f64; 3] {
@@ -2910,12 +2914,13 @@ fn gnss_residual(ep: &EpochSlot) -> ([f64; 3], [[f64; 3]; 3]) {
     let rot = &ep.rot.0;
     let ml = mt_l(&rot[..9]);
     let r = core::array::from_fn(|a| ep.params[3 + a] + ml[a] - ep.gnss[a]);
-    let mut j = [[0.0; 3]; 3];
+    let mut j = [[0.0; 6]; 3];
     for k in 0..3 {
         let d = mt_l(&rot[9 * (k + 1)..9 * (k + 2)]);
         for a in 0..3 {
             j[a][k] = d[a];
         }
+        j[k][3 + k] = 1.0;
     }
     (r, j)
 }

@@ -74,13 +74,7 @@ fn apply_aiding(ds: &mut Dataset, args: &Args) -> Result<()> {
     let all = ds.gnss.len();
     ds.gnss = aiding::withhold(&ds.gnss, &args.gnss_outage);
     ds.gnss_outages = args.gnss_outage.clone();
-    let span = ds.epochs.first().zip(ds.epochs.last());
-    let (t0, t1) = span.map_or((0.0, 0.0), |(a, b)| {
-        (
-            a.time.unwrap_or(0.0),
-            b.time.unwrap_or((ds.len() - 1) as f64),
-        )
-    });
+    let (t0, t1) = (ds.time_of(0), ds.time_of(ds.len().saturating_sub(1)));
     let outside = ds
         .gnss
         .iter()

@@ -16,6 +16,7 @@
 //!
 //! Times are on the clock of `times.txt`. Empty lines and `#` comments are skipped.
 use super::DatasetError;
+use phototraverse_core::camera::Pose;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -100,7 +101,7 @@ impl GnssSetup {
         })?;
         let file: GnssSetupFile = toml::from_str(&text).map_err(|e| DatasetError::RigFile {
             path: path.to_path_buf(),
-            problem: e.to_string().lines().collect::<Vec<_>>().join(" | "),
+            problem: super::rigfile::toml_problem(&e),
         })?;
         file.gnss.validated(path)
     }
@@ -169,11 +170,7 @@ fn read_fixes(path: &Path, format: &str) -> Result<Vec<GnssFix>, DatasetError> {
     let rows = read_rows::<5>(path, format)?;
     let mut fixes = Vec::with_capacity(rows.len());
     for (line, v) in rows {
-        let bad = |problem: String| DatasetError::AidingLine {
-            path: path.to_path_buf(),
-            line,
-            problem,
-        };
+        let bad = line_error(path, line);
         if v[4] <= 0.0 {
             return Err(bad(format!("sigma_m {} is not positive", v[4])));
         }
@@ -192,11 +189,7 @@ pub fn read_odometer(path: &Path) -> Result<Vec<OdometerReading>, DatasetError> 
     let rows = read_rows::<3>(path, "time_s distance_m sigma_m")?;
     let mut readings = Vec::with_capacity(rows.len());
     for (line, v) in rows {
-        let bad = |problem: String| DatasetError::AidingLine {
-            path: path.to_path_buf(),
-            line,
-            problem,
-        };
+        let bad = line_error(path, line);
         if v[1] < 0.0 {
             return Err(bad(format!("distance_m {} is negative", v[1])));
         }
@@ -237,11 +230,7 @@ fn read_rows<const N: usize>(
         if line.is_empty() || line.starts_with('#') {
             continue;
         }
-        let bad = |problem: String| DatasetError::AidingLine {
-            path: path.to_path_buf(),
-            line: i + 1,
-            problem,
-        };
+        let bad = line_error(path, i + 1);
         let fields: Vec<&str> = line.split_whitespace().collect();
         if fields.len() != N {
             return Err(bad(format!(
@@ -281,11 +270,32 @@ pub fn parse_span(s: &str) -> Result<(f64, f64), String> {
     Ok((a, b))
 }
 
+/// The error of line `line` of `path`.
+fn line_error(path: &Path, line: usize) -> impl Fn(String) -> DatasetError + '_ {
+    move |problem| DatasetError::AidingLine {
+        path: path.to_path_buf(),
+        line,
+        problem,
+    }
+}
+
+/// Whether time `t` lies in one of `spans` (`[start, end]`, seconds).
+pub fn within(spans: &[(f64, f64)], t: f64) -> bool {
+    spans.iter().any(|&(a, b)| t >= a && t <= b)
+}
+
+/// The position of an antenna at `lever_arm` (left camera frame) from the pose's
+/// perspective centre: `C + M^T l`, the point a fix measures.
+pub fn antenna_position(pose: &Pose, lever_arm: [f64; 3]) -> [f64; 3] {
+    let l = pose.rotation().transpose() * nalgebra::Vector3::from(lever_arm);
+    [0, 1, 2].map(|k| pose.centre[k] + l[k])
+}
+
 /// The fixes outside every span `[start, end]` of `outages` (seconds).
 pub fn withhold(fixes: &[GnssFix], outages: &[(f64, f64)]) -> Vec<GnssFix> {
     fixes
         .iter()
-        .filter(|f| !outages.iter().any(|&(a, b)| f.time >= a && f.time <= b))
+        .filter(|f| !within(outages, f.time))
         .copied()
         .collect()
 }

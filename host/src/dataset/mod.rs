@@ -229,6 +229,12 @@ impl Dataset {
         })
     }
 
+    /// The time of epoch `i`, seconds: `times.txt`'s, or `i` without it (one second an
+    /// epoch: the motion prediction only needs ratios).
+    pub fn time_of(&self, i: usize) -> f64 {
+        self.epochs.get(i).and_then(|e| e.time).unwrap_or(i as f64)
+    }
+
     pub fn len(&self) -> usize {
         self.epochs.len()
     }

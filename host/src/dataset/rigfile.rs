@@ -145,18 +145,21 @@ pub fn parse_rig(text: &str, path: &Path) -> Result<(Rig, Pose), DatasetError> {
     parse_rig_file(text, path).map(|f| (f.rig, f.datum))
 }
 
+/// A TOML error on one line. toml's message names the missing or bad key and its
+/// table, e.g. "missing field `focal_mm`" in `left`.
+pub(super) fn toml_problem(e: &toml::de::Error) -> String {
+    e.to_string()
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .collect::<Vec<_>>()
+        .join(" | ")
+}
+
 /// Parses rig.toml text, the calibration's precision included.
 pub fn parse_rig_file(text: &str, path: &Path) -> Result<RigFile, DatasetError> {
     let file: RigToml = toml::from_str(text).map_err(|e| DatasetError::RigFile {
         path: path.to_path_buf(),
-        // toml's message names the missing or bad key and its table, e.g.
-        // "missing field `focal_mm`" in `left`; keep it on one line.
-        problem: e
-            .to_string()
-            .lines()
-            .filter(|l| !l.trim().is_empty())
-            .collect::<Vec<_>>()
-            .join(" | "),
+        problem: toml_problem(&e),
     })?;
     let left = camera_from(&file.left, "left", path)?;
     let right = camera_from(&file.right, "right", path)?;

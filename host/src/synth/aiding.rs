@@ -9,7 +9,8 @@
 use super::realism::gaussian;
 use super::ScenePlan;
 use crate::dataset::aiding::{
-    GnssSetup, GNSS_FILE, GNSS_GEODETIC_FILE, GNSS_SETUP_FILE, ODOMETER_FILE,
+    antenna_position, within, GnssSetup, GNSS_FILE, GNSS_GEODETIC_FILE, GNSS_SETUP_FILE,
+    ODOMETER_FILE,
 };
 use phototraverse_core::camera::{kitti_from_pose, pose_from_kitti, Pose};
 use rand::SeedableRng;
@@ -52,11 +53,7 @@ pub fn write_aiding(
     };
     let centre = |t: f64| pose(t).centre;
     // The antenna: the centre plus the lever arm turned into the object frame (M^T l).
-    let antenna = |t: f64| {
-        let p = pose(t);
-        let l = p.rotation().transpose() * nalgebra::Vector3::from(opts.lever_arm_m);
-        [0, 1, 2].map(|a| p.centre[a] + l[a])
-    };
+    let antenna = |t: f64| antenna_position(&pose(t), opts.lever_arm_m);
     let setup = GnssSetup {
         origin: opts.geodetic.map(|g| [g[0], g[1], g[2]]),
         heading_deg: opts.geodetic.map_or(0.0, |g| g[3]),
@@ -83,7 +80,7 @@ pub fn write_aiding(
             }
         });
         for t in times {
-            if opts.gnss_outages.iter().any(|&(a, b)| t >= a && t <= b) {
+            if within(&opts.gnss_outages, t) {
                 continue;
             }
             let p = antenna(t).map(|v| v + sigma * gaussian(&mut rng));
