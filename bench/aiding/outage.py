@@ -7,7 +7,9 @@ Prints, for the epochs whose time lies in the outage: the largest position error
 for the images-only run after re-anchoring (its pose at the outage's first epoch replaced by
 the truth, the rest of its trajectory moved rigidly with it), and the share of epochs whose
 error is within 3 standard deviations on each coordinate (the sd of eop.csv / report.json);
-for the other epochs: the RMS position error (3D) and per coordinate. Distances in metres.
+for the other epochs: the RMS position error (3D) and per coordinate; and the same two figures
+for the positions as the firmware output them (`realtime_centre_m`), before `run` smoothed them
+over all the fixes. Distances in metres.
 
 usage: outage.py AIDED_DIR IMAGES_ONLY_DIR START_S END_S
 """
@@ -67,6 +69,12 @@ def main():
     rms = math.sqrt(float(np.mean(norms[outside] ** 2)))
     per = np.sqrt(np.mean(err[outside] ** 2, axis=0))
     print(f"  outside ({len(outside)} epochs): RMS position error {rms:.4f} m (X/Y/Z {per[0]:.4f}/{per[1]:.4f}/{per[2]:.4f})")
+    if all(e.get("realtime_centre_m") for e in ep):
+        # The positions as the firmware output them, before the smoothing over the fixes.
+        rt = np.array([np.array(e["realtime_centre_m"]) - gt[i] for i, e in enumerate(ep)])
+        rt_norms = np.linalg.norm(rt, axis=1)
+        rt_rms = math.sqrt(float(np.mean(rt_norms[outside] ** 2)))
+        print(f"  the firmware's positions (before smoothing): largest inside {rt_norms[inside].max():.3f} m, RMS outside {rt_rms:.4f} m")
 
 
 if __name__ == "__main__":

@@ -109,6 +109,7 @@ pub fn epoch_result(epoch: u32, out: &traverse::EpochOutput) -> EpochResult {
             chi2: out.sigma0 * out.sigma0 * out.redundancy as f64,
             redundancy: out.redundancy,
             relative_sd_m: out.relative_std_m.map_or([0.0; 3], |s| s.map(|v| v as f32)),
+            step_m: out.step_m.map(|s| s.map(|v| v as f32)),
         })
     } else {
         Figures::None
@@ -588,6 +589,7 @@ mod tests {
                 chi2: 1.0,
                 redundancy: u32::MAX,
                 relative_sd_m: [1.0; 3],
+                step_m: Some([1.0; 3]),
             }),
             Figures::Sift(SiftCounts {
                 extrema: [u32::MAX; 2],

@@ -10,4 +10,5 @@ pub mod poses;
 pub mod report;
 pub mod runner;
 pub mod session;
+pub mod smoothing;
 pub mod synth;

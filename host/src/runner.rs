@@ -19,6 +19,7 @@ use crate::report::{
     RunReport, TieCollector,
 };
 use crate::session::{EpochFrames, Session, SessionOptions};
+use crate::smoothing;
 use anyhow::{Context, Result};
 use phototraverse_core::adjust::quality::ChiSquareTest;
 use phototraverse_core::budget::{ComponentKind, MemoryBudget};
@@ -342,6 +343,11 @@ impl<'d> Run<'d> {
                 .adjustment()
                 .map(|a| a.relative_sd_m.map(f64::from))
                 .filter(|s| s.iter().any(|v| *v > 0.0)),
+            step_m: r
+                .adjustment()
+                .and_then(|a| a.step_m)
+                .map(|s| s.map(f64::from)),
+            realtime_centre_m: None,
         }
     }
 
@@ -429,12 +435,37 @@ impl<'d> Run<'d> {
         lines
     }
 
+    /// Smooths the positions over all the GNSS fixes ([`crate::smoothing`]) and
+    /// rewrites `poses.txt`, which held the positions as the firmware gave them.
+    fn smooth(&mut self) -> Result<()> {
+        let rig = self.rig;
+        let lever_arm = self.ds.gnss_setup.lever_arm_m;
+        self.report.smoothing =
+            smoothing::smooth_over_fixes(&mut self.report.epochs, lever_arm, |p| rig.right_pose(p));
+        if self.report.smoothing.is_none() {
+            return Ok(());
+        }
+        self.kitti = self
+            .report
+            .epochs
+            .iter()
+            .map(|e| kitti_from_pose(&self.datum, &e.left.to_pose()))
+            .collect();
+        let text: String = self.kitti.iter().map(|k| format_pose(k) + "\n").collect();
+        // Written aside and renamed: an interruption leaves the firmware's poses whole.
+        let (path, aside) = (self.out.join("poses.txt"), self.out.join("poses.txt.part"));
+        std::fs::write(&aside, text)
+            .with_context(|| format!("cannot write {}", aside.display()))?;
+        std::fs::rename(&aside, &path).with_context(|| format!("cannot replace {}", path.display()))
+    }
+
     fn finish<T: crate::link::Transport>(mut self, session: &Session<T>) -> Result<RunOutcome> {
         let last = self.report.epochs.len().checked_sub(1);
         let high_water = last
             .and_then(|l| session.stats(l as u32))
             .map(|s| s.memory_high_water);
         self.report.memory = self.memory_lines(high_water);
+        self.smooth()?;
         for (e, v) in velocities(&self.report.epochs).into_iter().enumerate() {
             self.report.epochs[e].velocity = v;
         }

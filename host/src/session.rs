@@ -246,6 +246,7 @@ pub struct AdjustmentRecord {
     pub chi2: f64,
     pub redundancy: u32,
     pub relative_sd_m: [f32; 3],
+    pub step_m: Option<[f32; 3]>,
 }
 
 /// The feature extractor's figures of a result (left, right).
@@ -672,6 +673,7 @@ impl<T: Transport> Session<T> {
                         chi2: a.chi2,
                         redundancy: a.redundancy,
                         relative_sd_m: a.relative_sd_m,
+                        step_m: a.step_m,
                     }),
                     sift: r.sift().map(|s| SiftRecord {
                         extrema: s.extrema,

@@ -1059,6 +1059,11 @@ pub struct Adjustment {
     /// Standard deviations of the left perspective centre X, Y, Z (m) relative to the
     /// recent past (the poses that left the window held exact); 0: not estimated.
     pub relative_sd_m: [f32; 3],
+    /// The left perspective centre's displacement from the previous epoch's (m), both
+    /// as adjusted in this window: the images' step, undistorted by GNSS fixes, which
+    /// move the window as a whole. `None` when the previous epoch is not in the window.
+    /// `f32` keeps a few tenths of a micrometre on a step of metres.
+    pub step_m: Option<[f32; 3]>,
 }
 
 /// What the feature extractor found in each image (left, right).
@@ -1111,6 +1116,11 @@ impl Figures {
                 chi2: r.f64()?,
                 redundancy: r.u32()?,
                 relative_sd_m: [r.f32()?, r.f32()?, r.f32()?],
+                step_m: match r.u8()? {
+                    0 => None,
+                    1 => Some([r.f32()?, r.f32()?, r.f32()?]),
+                    _ => return Err(ParseError::Invalid("result step presence")),
+                },
             }),
             figures_kind::SIFT => Figures::Sift(SiftCounts {
                 extrema: r.u32s()?,
@@ -1132,7 +1142,14 @@ impl Figures {
                 w.u8(figures_kind::ADJUSTMENT)?;
                 w.f64s(&[a.sigma0, a.rms_px, a.chi2])?;
                 w.u32(a.redundancy)?;
-                a.relative_sd_m.iter().try_for_each(|v| w.f32(*v))
+                a.relative_sd_m.iter().try_for_each(|v| w.f32(*v))?;
+                match a.step_m {
+                    None => w.u8(0),
+                    Some(step) => {
+                        w.u8(1)?;
+                        step.iter().try_for_each(|v| w.f32(*v))
+                    }
+                }
             }
             Figures::Sift(s) => {
                 w.u8(figures_kind::SIFT)?;

@@ -136,6 +136,7 @@ pub fn sample_result() -> EpochResult {
             chi2: 0.81 * 1234.0,
             redundancy: 1234,
             relative_sd_m: [0.002, 0.004, 0.003],
+            step_m: Some([0.01, 2.0, -0.02]),
         }),
         rig: None,
     }

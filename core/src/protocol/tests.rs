@@ -257,16 +257,16 @@ fn result_rig_block_is_optional_and_complete_when_present() {
     assert_eq!(EpochResult::parse(&payload[..n]).unwrap(), r);
     r.figures = sample_result().figures;
     let n = r.emit(&mut payload).unwrap();
-    assert_eq!(n, 178);
+    assert_eq!(n, 191);
     assert_eq!(EpochResult::parse(&payload[..n]).unwrap(), r);
     r.rig = Some(RigEstimate {
         params: [0.001, -0.002, 0.003, 0.4, 0.001, -0.002],
         std: [1e-4, 2e-4, 3e-4, 1e-3, 2e-3, 3e-3],
     });
     let n = r.emit(&mut payload).unwrap();
-    assert_eq!(n, 226);
+    assert_eq!(n, 239);
     assert_eq!(EpochResult::parse(&payload[..n]).unwrap(), r);
-    for cut in 179..n {
+    for cut in 192..n {
         assert_eq!(
             EpochResult::parse(&payload[..cut]),
             Err(ParseError::Truncated),
@@ -283,7 +283,14 @@ fn every_result_block_round_trips_and_the_largest_fits_a_transmit_slot() {
     });
     let blocks = [
         (Figures::None, 138),
-        (sample_result().figures, 178),
+        (sample_result().figures, 191),
+        (
+            match sample_result().figures {
+                Figures::Adjustment(a) => Figures::Adjustment(Adjustment { step_m: None, ..a }),
+                other => other,
+            },
+            179,
+        ),
         (
             Figures::Sift(SiftCounts {
                 extrema: [5000, 4800],
@@ -316,7 +323,7 @@ fn every_result_block_round_trips_and_the_largest_fits_a_transmit_slot() {
         }
     }
     // The firmware's transmit slot holds 256 bytes of payload.
-    assert_eq!(largest, 226);
+    assert_eq!(largest, 239);
     assert!(largest <= 256);
     // Blocks the wire does not define are refused by name: their length is unknown.
     let n = sample_result().emit(&mut payload).unwrap();
@@ -324,6 +331,13 @@ fn every_result_block_round_trips_and_the_largest_fits_a_transmit_slot() {
     assert_eq!(
         EpochResult::parse(&payload[..n]),
         Err(ParseError::Invalid("result figures kind"))
+    );
+    // The step's presence byte follows the 40 bytes of the figures it ends.
+    payload[137] = 1;
+    payload[178] = 2;
+    assert_eq!(
+        EpochResult::parse(&payload[..n]),
+        Err(ParseError::Invalid("result step presence"))
     );
 }
 

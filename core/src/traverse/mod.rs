@@ -678,6 +678,9 @@ impl<'a> Traverse<'a> {
         out.left = initial;
         out.right = self.right_of(&initial);
         let adjusted = first || self.solve(id, prediction, out);
+        if adjusted {
+            out.step_m = self.step_from_previous(k);
+        }
         out.times.adjust_us = elapsed(t3, clock.now_us());
         self.prev_window_epoch = Some(id);
         // The window counts its refusals since the start: this epoch's are the increase.
@@ -689,6 +692,20 @@ impl<'a> Traverse<'a> {
         out.observations = self.window.observations().len() as u32;
         out.points = self.window_points().count() as u32;
         adjusted
+    }
+
+    /// The newest window epoch's centre minus the previous one's, when that is input
+    /// epoch `k - 1`: a step between epochs of one adjustment.
+    fn step_from_previous(&self, k: u32) -> Option<[f64; 3]> {
+        let n = self.window.n_epochs();
+        if n < 2 || self.window_inputs[n - 2] != k.wrapping_sub(1) {
+            return None;
+        }
+        let (a, b) = (
+            self.window.epoch_pose(n - 2)?,
+            self.window.epoch_pose(n - 1)?,
+        );
+        Some([0, 1, 2].map(|i| b.centre[i] - a.centre[i]))
     }
 
     /// Drops the oldest window epoch (its pose is final) and keeps the slot map in step.

@@ -103,6 +103,11 @@ pub struct EpochOutput {
     /// that left the window held exact: its precision relative to the recent past, what
     /// a velocity from neighbouring epochs is uncertain by.
     pub relative_std_m: Option<[f64; 3]>,
+    /// The left perspective centre's displacement from the previous epoch's (m), both
+    /// as adjusted in this epoch's window: the images' step, which fixes shift with the
+    /// whole window and do not distort. `None` when the previous epoch is not in the
+    /// window (the first epoch, an epoch after one that was not adjusted).
+    pub step_m: Option<[f64; 3]>,
     /// A-posteriori sigma0 of the window adjustment (0 when not adjusted).
     pub sigma0: f64,
     pub chi2_passed: bool,

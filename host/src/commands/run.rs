@@ -155,6 +155,16 @@ pub fn summary(o: &RunOutcome) -> String {
             g.std[5]
         );
     }
+    if let Some(m) = &r.smoothing {
+        s += &format!(
+            "GNSS: positions smoothed over {} fixes (the images' step estimated at {:.1} mm); \
+             moved {:.3} m RMS, {:.3} m at most from the on-board ones\n",
+            m.fixes,
+            m.step_sd_m * 1e3,
+            m.rms_shift_m,
+            m.largest_shift_m
+        );
+    }
     if let Some(total) = r.memory.iter().find(|m| m.name.starts_with("total")) {
         s += &format!(
             "memory: {:.1} KiB predicted, {} measured\n",

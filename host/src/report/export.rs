@@ -189,6 +189,8 @@ mod tests {
             odometer_count_m: None,
             velocity: None,
             relative_sd_m: None,
+            step_m: None,
+            realtime_centre_m: None,
         };
         let report = RunReport {
             epochs: vec![rec],

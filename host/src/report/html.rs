@@ -551,6 +551,8 @@ mod tests {
                 odometer_count_m: None,
                 velocity: None,
                 relative_sd_m: None,
+                step_m: None,
+                realtime_centre_m: None,
             });
         }
         report.ground_truth = Some((0..5).map(|k| [0.0, k as f64, 0.0]).collect());

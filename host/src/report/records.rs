@@ -115,6 +115,14 @@ pub struct EpochRecord {
     /// epochs is uncertain by; `left.sigma` is with respect to the datum.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub relative_sd_m: Option<[f64; 3]>,
+    /// The left centre's displacement from the previous epoch's (m), both from this
+    /// epoch's window adjustment: the images' step (`crate::smoothing`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub step_m: Option<[f64; 3]>,
+    /// The left centre as the firmware output it, when the smoothing over the GNSS fixes
+    /// moved it (`left` is then the smoothed one), m.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub realtime_centre_m: Option<[f64; 3]>,
 }
 
 impl EpochRecord {
@@ -144,6 +152,8 @@ impl EpochRecord {
             odometer_count_m: None,
             velocity: None,
             relative_sd_m: None,
+            step_m: None,
+            realtime_centre_m: None,
         }
     }
 }
@@ -246,6 +256,9 @@ pub struct RunReport {
     pub evaluation: Option<serde_json::Value>,
     /// Link statistics (bytes, retransmissions, errors).
     pub link: Option<serde_json::Value>,
+    /// The positions' smoothing over the GNSS fixes after the run, when there were fixes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub smoothing: Option<crate::smoothing::SmoothingSummary>,
     /// The rig as the adjustment had it at the last epoch, when it differs from the
     /// calibration: estimated (`--estimate-rig`, with standard deviations) or corrected
     /// by the calibration check (standard deviations zero).
