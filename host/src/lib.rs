@@ -4,6 +4,7 @@ pub mod block;
 pub mod commands;
 pub mod dataset;
 pub mod eval;
+pub mod interrupt;
 pub mod link;
 pub mod pipeline;
 pub mod poses;

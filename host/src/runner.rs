@@ -76,6 +76,12 @@ pub fn run_dataset(ds: &Dataset, out: &Path, opts: &RunOptions) -> Result<RunOut
     let bar = progress_bar(n as u64, opts.progress);
     let mut failure = None;
     for i in 0..n {
+        if crate::interrupt::requested() {
+            // The epochs done are finished as at the sequence's end: their last results
+            // and tie points are waited for, and every output is written.
+            run.report.interrupted = true;
+            break;
+        }
         if let Err(e) = run.epoch(&mut session, i) {
             failure = Some(e.context(format!("epoch {i} ({})", ds.epochs[i].name)));
             break;

@@ -70,11 +70,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         "orienting it through the firmware over the {:?} link ...",
         run.link.link
     );
+    crate::interrupt::install();
     let outcome = run_dataset(&ds, &results, &run)?;
     print!("{}", summary(&outcome));
     println!(
         "wrote poses.txt, eop.csv, points.ply, efoto/, report.json and report.html in {}",
         results.display()
     );
+    crate::interrupt::exit_if_interrupted(&outcome, ds.len());
     Ok(())
 }

@@ -9,7 +9,9 @@ use std::path::PathBuf;
 /// Orient a stereo sequence through the firmware and write poses.txt (KITTI), eop.csv,
 /// report.json and report.html into the output directory. The dataset is a KITTI
 /// odometry sequence (image_0/, image_1/, calib.txt) or a rig.toml layout (left/,
-/// right/, rig.toml); a gt_poses.txt beside it is used for evaluation.
+/// right/, rig.toml); a gt_poses.txt beside it is used for evaluation. Ctrl-C (or
+/// SIGTERM) stops the run after the epoch in hand and writes every output for the
+/// epochs done (exit status 130); a second Ctrl-C quits at once.
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Dataset directory.
@@ -111,9 +113,12 @@ pub fn run(args: Args) -> Result<()> {
         max_epochs: args.max_epochs,
         progress: !args.quiet,
     };
+    crate::interrupt::install();
     let outcome = run_dataset(&ds, &args.out, &opts)?;
     print!("{}", summary(&outcome));
     println!("outputs in {}", args.out.display());
+    let planned = opts.max_epochs.map_or(ds.len(), |m| m.min(ds.len()));
+    crate::interrupt::exit_if_interrupted(&outcome, planned);
     Ok(())
 }
 

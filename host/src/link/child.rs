@@ -90,6 +90,10 @@ pub struct ChildLink {
 impl ChildLink {
     pub fn spawn(memory: usize, processor: super::FirmwareProcessor) -> anyhow::Result<Self> {
         let (mut cmd, bin) = firmware_command()?;
+        // In its own process group: Ctrl-C at the terminal goes to the host alone, which
+        // stops between epochs and still needs the firmware for the epochs in flight.
+        #[cfg(unix)]
+        std::os::unix::process::CommandExt::process_group(&mut cmd, 0);
         let mut child = cmd
             .args(firmware_args(memory, processor))
             .stdin(Stdio::piped())

@@ -168,14 +168,21 @@ fn gnss_sections(report: &RunReport) -> Result<Vec<(&'static str, String)>> {
     ));
     let time = |e: &super::EpochRecord| e.time.unwrap_or(e.epoch as f64);
     if let Some(gt) = &report.ground_truth {
+        let distance = |c: [f64; 3], g: &[f64; 3]| {
+            ((c[0] - g[0]).powi(2) + (c[1] - g[1]).powi(2) + (c[2] - g[2]).powi(2)).sqrt()
+        };
         let error: Vec<(f64, f64)> = report
             .epochs
             .iter()
             .zip(gt)
-            .map(|(e, g)| {
-                let d = [e.left.x - g[0], e.left.y - g[1], e.left.z - g[2]];
-                (time(e), (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt())
-            })
+            .map(|(e, g)| (time(e), distance([e.left.x, e.left.y, e.left.z], g)))
+            .collect();
+        // The firmware's own positions, before the smoothing over all the fixes.
+        let realtime: Vec<(f64, f64)> = report
+            .epochs
+            .iter()
+            .zip(gt)
+            .filter_map(|(e, g)| Some((time(e), distance(e.realtime_centre_m?, g))))
             .collect();
         let sd3: Vec<(f64, f64)> = report
             .epochs
@@ -188,7 +195,7 @@ fn gnss_sections(report: &RunReport) -> Result<Vec<(&'static str, String)>> {
                 ))
             })
             .collect();
-        let s = [
+        let mut s = vec![
             Series {
                 name: "position error".into(),
                 points: error,
@@ -198,6 +205,12 @@ fn gnss_sections(report: &RunReport) -> Result<Vec<(&'static str, String)>> {
                 points: sd3,
             },
         ];
+        if !realtime.is_empty() {
+            s.push(Series {
+                name: "error on board (before smoothing)".into(),
+                points: realtime,
+            });
+        }
         out.push((
             "Position error and its predicted precision",
             line_chart(
@@ -482,6 +495,14 @@ pub fn write_html(path: &Path, report: &RunReport) -> Result<()> {
         report.image_height,
         report.flagged_epochs()
     );
+    if report.interrupted {
+        let _ = write!(
+            page,
+            "<p><strong>Interrupted</strong> (Ctrl-C or SIGTERM): the run stopped after {} \
+             epochs; everything here is of those.</p>",
+            report.epochs.len()
+        );
+    }
     if let Some(ev) = &report.evaluation {
         let _ = write!(
             page,

@@ -256,6 +256,10 @@ pub struct RunReport {
     pub evaluation: Option<serde_json::Value>,
     /// Link statistics (bytes, retransmissions, errors).
     pub link: Option<serde_json::Value>,
+    /// A signal (Ctrl-C, SIGTERM) stopped the run before the sequence's end: the outputs
+    /// hold the epochs done.
+    #[serde(default)]
+    pub interrupted: bool,
     /// The positions' smoothing over the GNSS fixes after the run, when there were fixes.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub smoothing: Option<crate::smoothing::SmoothingSummary>,
