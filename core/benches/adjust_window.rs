@@ -1,4 +1,4 @@
-//! Benchmark of one window update (issue 5) and a sweep of synthetic problems.
+//! Benchmark of one window update and a sweep of synthetic problems.
 //!
 //! `cargo bench -p phototraverse-core --bench adjust_window` writes
 //! `bench/adjust/out/problem.json` (8 epochs, 300 points, 4 observations each,

@@ -477,7 +477,7 @@ proptest! {
     }
 }
 
-/// The configuration measured against issue 3's bars (bench/sift/README.md).
+/// The configuration measured against the SIFT benchmark's bars (bench/sift/README.md).
 fn bar_config(w: usize, h: usize) -> SiftConfig {
     SiftConfig {
         fine_octave: true,

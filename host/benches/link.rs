@@ -1,4 +1,4 @@
-//! Link benchmarks (issue 6), a plain `harness = false` program:
+//! Link benchmarks, a plain `harness = false` program:
 //! `cargo bench -p phototraverse-host --bench link [-- --quick]`.
 //!
 //! 1. In-process throughput of frame data through the whole protocol (encode,

@@ -92,7 +92,7 @@ fn refuses_a_missing_image() {
     assert!(String::from_utf8_lossy(&run.stderr).contains("none.png"));
 }
 
-/// The flag set bench/sift runs against issue 3's bars: accepted, deterministic; a bad
+/// The flag set bench/sift runs against its bars (speed, memory, quality against OpenCV): accepted, deterministic; a bad
 /// operator name or grid is refused with a message.
 #[test]
 fn issue3_flag_set_runs_deterministically_and_bad_values_are_refused() {

@@ -1,4 +1,4 @@
-//! Intersection, resection and incremental bundle adjustment (issue 5).
+//! Intersection, resection and incremental bundle adjustment.
 //!
 //! Scalar type: `f64` throughout (see docs/adjustment.md): the normal
 //! equations mix weights from 1e5 to 1e12, beyond the 7 digits of `f32`; the

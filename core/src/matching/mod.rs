@@ -1,4 +1,4 @@
-//! Stereo and temporal matching, quad tie points and tracks (issue 4).
+//! Stereo and temporal matching, quad tie points and tracks.
 //!
 //! One file per concern: [`config`] (configuration, budget), [`distance`] (u8 descriptor
 //! distance with early exit), [`grid`] (spatial index), [`search`] (the shared

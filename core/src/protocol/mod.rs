@@ -1,4 +1,4 @@
-//! Serial framing protocol (issue 6), smoltcp `wire` style.
+//! Serial framing protocol, smoltcp `wire` style.
 //!
 //! On the wire every packet is `COBS(header | payload | CRC-32) 0x00`:
 //! - [`cobs`]: byte stuffing so 0x00 delimits packets;

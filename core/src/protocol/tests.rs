@@ -648,7 +648,7 @@ mod properties {
     }
 }
 
-/// The million-stream fuzz run reported for issue 6 (release mode, about a minute):
+/// The million-stream fuzz run (release mode, about a minute):
 /// `cargo test -p phototraverse-core --release decoder_million -- --ignored --nocapture`.
 #[test]
 #[ignore]

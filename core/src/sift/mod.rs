@@ -1,4 +1,4 @@
-//! Reduced SIFT over integer buffers (issue 3).
+//! Reduced SIFT over integer buffers.
 //!
 //! Scale space: each octave is streamed row by row. Level 0 is blurred from the
 //! octave source (the input image, or level `levels` of the previous octave decimated
