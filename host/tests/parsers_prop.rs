@@ -1,5 +1,5 @@
 //! Property tests of the text parsers: never a panic on any input, exact round trips.
-use phototraverse_host::dataset::kitti::{calib_text, parse_calib, rig_from_calib};
+use phototraverse_host::dataset::kitti::{calib_text, pair_rows, parse_calib, rig_from_calib};
 use phototraverse_host::dataset::rigfile::{parse_rig, rig_toml_text};
 use phototraverse_host::poses::{format_pose, parse_poses, KittiPose};
 use phototraverse_host::synth::realism::CalibError;
@@ -36,17 +36,22 @@ proptest! {
 
     #[test]
     fn calib_parser_never_panics(text in "(P[0-3]: ?)?[-0-9. e+a-z]{0,200}(\n[-0-9. e+P:]{0,120}){0,3}") {
-        if let Ok((p0, p1)) = parse_calib(&text, Path::new("calib.txt")) {
-            let _ = rig_from_calib(&p0, &p1, 64, 48, Path::new("calib.txt"));
+        if let Ok(rows) = parse_calib(&text, Path::new("calib.txt")) {
+            for pair in [(0, 1), (2, 3)] {
+                if let Ok((l, r)) = pair_rows(&rows, pair, Path::new("calib.txt")) {
+                    let _ = rig_from_calib(&l, &r, 64, 48, Path::new("calib.txt"));
+                }
+            }
         }
     }
 
     #[test]
     fn calib_round_trips(f in 100.0f64..2000.0, aspect in 0.8f64..1.25, cx in 0.0f64..640.0, cy in 0.0f64..480.0, b in 0.05f64..2.0) {
         let text = format!("P0: {f} 0 {cx} 0 0 {} {cy} 0 0 0 1 0\nP1: {f} 0 {cx} {} 0 {} {cy} 0 0 0 1 0\n", f * aspect, -f * b, f * aspect);
-        let (p0, p1) = parse_calib(&text, Path::new("c")).unwrap();
+        let grey = |t: &str| pair_rows(&parse_calib(t, Path::new("c")).unwrap(), (0, 1), Path::new("c")).unwrap();
+        let (p0, p1) = grey(&text);
         let rig = rig_from_calib(&p0, &p1, 640, 480, Path::new("c")).unwrap();
-        let (q0, q1) = parse_calib(&calib_text(&rig), Path::new("c")).unwrap();
+        let (q0, q1) = grey(&calib_text(&rig));
         let back = rig_from_calib(&q0, &q1, 640, 480, Path::new("c")).unwrap();
         prop_assert!((back.base_length() - b).abs() < 1e-9 * b.max(1.0));
         for i in 0..2 {

@@ -1,5 +1,5 @@
 //! `phototraverse run DATASET --out DIR`: orient every image of a stereo sequence.
-use crate::dataset::{aiding, Dataset};
+use crate::dataset::{aiding, Dataset, OpenOptions};
 use crate::link::LinkOptions;
 use crate::pipeline::{Mode, PipelineSettings};
 use crate::runner::{run_dataset, RunOptions, RunOutcome};
@@ -52,8 +52,27 @@ pub struct Args {
     /// Orient from the images alone: ignore GNSS and odometer.
     #[arg(long, conflicts_with_all = ["gnss", "gnss_geodetic", "odometer", "gnss_outage"])]
     pub images_only: bool,
+    /// KITTI: the camera pair, `0,1` (grey) or `2,3` (colour, converted to grey).
+    /// Default: the grey pair when image_0/ and image_1/ are there, else the colour pair.
+    #[arg(long, value_name = "LEFT,RIGHT", value_parser = parse_cameras)]
+    pub cameras: Option<(usize, usize)>,
+    /// Ground-truth poses (KITTI format, one line per epoch) for the evaluation, instead
+    /// of the dataset's gt_poses.txt or, in a KITTI tree, poses/NN.txt beside sequences/NN.
+    #[arg(long, value_name = "FILE")]
+    pub gt: Option<PathBuf>,
     #[command(flatten)]
     pub link: LinkOptions,
+}
+
+/// `0,1` or `2,3`: KITTI's grey and colour pairs.
+fn parse_cameras(s: &str) -> Result<(usize, usize), String> {
+    match s.replace(' ', "").as_str() {
+        "0,1" => Ok((0, 1)),
+        "2,3" => Ok((2, 3)),
+        other => Err(format!(
+            "`{other}`: KITTI's pairs are 0,1 (grey) and 2,3 (colour)"
+        )),
+    }
 }
 
 /// Replaces, withholds or drops the dataset's aiding observations as the options say,
@@ -99,7 +118,11 @@ fn apply_aiding(ds: &mut Dataset, args: &Args) -> Result<()> {
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let mut ds = Dataset::open(&args.dataset)
+    let open = OpenOptions {
+        kitti_cameras: args.cameras,
+        ground_truth: args.gt.clone(),
+    };
+    let mut ds = Dataset::open_with(&args.dataset, &open)
         .with_context(|| format!("cannot open the dataset {}", args.dataset.display()))?;
     apply_aiding(&mut ds, &args)?;
     let mut settings = PipelineSettings::load(args.config.as_deref())?;

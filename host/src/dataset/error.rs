@@ -3,7 +3,7 @@ use std::path::PathBuf;
 
 #[derive(Debug, thiserror::Error)]
 pub enum DatasetError {
-    #[error("{dir}: not a dataset: expected image_0/, image_1/ and calib.txt (KITTI) or left/, right/ and rig.toml")]
+    #[error("{dir}: not a dataset: expected calib.txt with image_0/ and image_1/ or image_2/ and image_3/ (KITTI), or left/, right/ and rig.toml")]
     UnknownLayout { dir: PathBuf },
     #[error("{path}: cannot read: {source}")]
     Io {

@@ -31,6 +31,18 @@ const IMAGE_EXTENSIONS: &[&str] = &[
     "png", "jpg", "jpeg", "pgm", "ppm", "pnm", "bmp", "tif", "tiff",
 ];
 
+/// How to open a dataset; `Default` takes what the layout finds.
+#[derive(Debug, Clone, Default)]
+pub struct OpenOptions {
+    /// KITTI: the cameras (left, right), `(0, 1)` the grey pair or `(2, 3)` the colour
+    /// one; by default the grey pair when `image_0/` and `image_1/` are there, else the
+    /// colour pair.
+    pub kitti_cameras: Option<(usize, usize)>,
+    /// Ground-truth poses (KITTI format) instead of the dataset's `gt_poses.txt` or, in
+    /// a KITTI tree, `poses/NN.txt` beside `sequences/NN`.
+    pub ground_truth: Option<PathBuf>,
+}
+
 /// Which layout a dataset uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Layout {
@@ -65,8 +77,11 @@ pub struct Dataset {
     pub precision: CalibrationPrecision,
     /// Epochs in order.
     pub epochs: Vec<Epoch>,
-    /// Ground truth (`gt_poses.txt`), one pose per epoch.
+    /// Ground truth of the left camera, one pose per epoch ([`Dataset::open_with`]).
     pub ground_truth: Option<Vec<KittiPose>>,
+    /// KITTI: the left camera's centre in camera 0's frame (m; 0 for the grey pair), by
+    /// which camera-0 ground truth is moved to the left camera.
+    pub kitti_left_centre: [f64; 3],
     /// GNSS fixes (`gnss.txt`, or `gnss_geodetic.txt` converted), in time order; empty
     /// without either file.
     pub gnss: Vec<aiding::GnssFix>,
@@ -81,22 +96,34 @@ pub struct Dataset {
 impl Dataset {
     /// Opens `dir`, detecting its layout.
     pub fn open(dir: &Path) -> Result<Dataset, DatasetError> {
-        if dir.join("calib.txt").is_file() && dir.join("image_0").is_dir() {
-            Self::open_kitti(dir)
-        } else if dir.join("rig.toml").is_file() {
-            Self::open_rig(dir)
-        } else {
-            Err(DatasetError::UnknownLayout {
-                dir: dir.to_path_buf(),
-            })
-        }
+        Self::open_with(dir, &OpenOptions::default())
     }
 
-    fn open_kitti(dir: &Path) -> Result<Dataset, DatasetError> {
+    /// Opens `dir` with `opts`, detecting its layout.
+    pub fn open_with(dir: &Path, opts: &OpenOptions) -> Result<Dataset, DatasetError> {
+        let kitti_images = ["image_0", "image_2"].iter().any(|d| dir.join(d).is_dir());
+        let mut ds = if dir.join("calib.txt").is_file() && kitti_images {
+            Self::open_kitti(dir, opts.kitti_cameras)?
+        } else if dir.join("rig.toml").is_file() {
+            Self::open_rig(dir)?
+        } else {
+            return Err(DatasetError::UnknownLayout {
+                dir: dir.to_path_buf(),
+            });
+        };
+        ds.ground_truth = ds.read_ground_truth(opts.ground_truth.as_deref())?;
+        Ok(ds)
+    }
+
+    fn open_kitti(dir: &Path, cameras: Option<(usize, usize)>) -> Result<Dataset, DatasetError> {
         let calib_path = dir.join("calib.txt");
         let text = read_text(&calib_path)?;
-        let (p0, p1) = kitti::parse_calib(&text, &calib_path)?;
-        let (left_dir, right_dir) = (dir.join("image_0"), dir.join("image_1"));
+        let grey = dir.join("image_0").is_dir() && dir.join("image_1").is_dir();
+        let pair = cameras.unwrap_or(if grey { (0, 1) } else { (2, 3) });
+        let rows = kitti::parse_calib(&text, &calib_path)?;
+        let (p0, p1) = kitti::pair_rows(&rows, pair, &calib_path)?;
+        let image_dir = |c: usize| dir.join(format!("image_{c}"));
+        let (left_dir, right_dir) = (image_dir(pair.0), image_dir(pair.1));
         let pairs = pair_images(
             &list_images(&left_dir)?,
             &list_images(&right_dir)?,
@@ -115,7 +142,9 @@ impl Dataset {
             precision: kitti::CALIBRATION_PRECISION,
             gnss: None,
         };
-        Self::finish(dir, Layout::Kitti, file, pairs)
+        let mut ds = Self::finish(dir, Layout::Kitti, file, pairs)?;
+        ds.kitti_left_centre = kitti::centre_in_camera0(&p0);
+        Ok(ds)
     }
 
     fn open_rig(dir: &Path) -> Result<Dataset, DatasetError> {
@@ -156,20 +185,6 @@ impl Dataset {
         let times_path = dir.join(TIMES_FILE);
         let times = if times_path.is_file() {
             Some(read_times(&times_path, pairs.len())?)
-        } else {
-            None
-        };
-        let gt_path = dir.join(GT_FILE);
-        let ground_truth = if gt_path.is_file() {
-            let gt = read_poses(&gt_path)?;
-            if gt.len() != pairs.len() {
-                return Err(DatasetError::CountMismatch {
-                    path: gt_path,
-                    found: gt.len(),
-                    expected: pairs.len(),
-                });
-            }
-            Some(gt)
         } else {
             None
         };
@@ -221,12 +236,61 @@ impl Dataset {
             datum: file.datum,
             precision: file.precision,
             epochs,
-            ground_truth,
+            ground_truth: None,
+            kitti_left_centre: [0.0; 3],
             gnss,
             gnss_setup,
             gnss_outages: Vec::new(),
             odometer,
         })
+    }
+
+    /// The ground truth: `given`, else `gt_poses.txt`, else in a KITTI tree
+    /// `sequences/NN/../../poses/NN.txt`; `None` without any. KITTI's poses are camera
+    /// 0's: with the colour pair they are moved to camera 2 (its offset in `calib.txt`).
+    fn read_ground_truth(
+        &self,
+        given: Option<&Path>,
+    ) -> Result<Option<Vec<KittiPose>>, DatasetError> {
+        let kitti_tree = || {
+            let name = self.dir.file_name()?;
+            let poses = self.dir.parent()?.parent()?.join("poses");
+            Some(poses.join(name).with_extension("txt"))
+        };
+        let path = match given {
+            Some(p) => p.to_path_buf(),
+            None => match [Some(self.dir.join(GT_FILE)), kitti_tree()]
+                .into_iter()
+                .flatten()
+                .find(|p| p.is_file())
+            {
+                Some(p) => p,
+                None => return Ok(None),
+            },
+        };
+        let gt = read_poses(&path)?;
+        if gt.len() != self.epochs.len() {
+            return Err(DatasetError::CountMismatch {
+                path,
+                found: gt.len(),
+                expected: self.epochs.len(),
+            });
+        }
+        Ok(Some(
+            gt.iter().map(|p| self.moved_to_left_camera(p)).collect(),
+        ))
+    }
+
+    /// A camera-0 pose (KITTI) as the left camera's: the rectified cameras share the
+    /// rotation, so only the centre moves, by `R c - c` with `c` the left camera's
+    /// centre in camera 0's frame (0 for camera 0 itself).
+    fn moved_to_left_camera(&self, p: &KittiPose) -> KittiPose {
+        let c = self.kitti_left_centre;
+        let mut out = *p;
+        for (r, row) in out.iter_mut().enumerate() {
+            row[3] += (0..3).map(|k| p[r][k] * c[k]).sum::<f64>() - c[r];
+        }
+        out
     }
 
     /// The time of epoch `i`, seconds: `times.txt`'s, or `i` without it (one second an
