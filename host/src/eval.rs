@@ -13,8 +13,14 @@
 //!
 //! ATE RMSE is the RMS of the position differences with no alignment: both
 //! trajectories are expressed in the left camera frame of epoch 0, so they
-//! share their origin by construction. The final-position error is the
-//! distance between the last positions as a percentage of the path length.
+//! share their origin by construction. As evo's `ape -a` / `-as` give them, the ATE is
+//! also stated after the least-squares alignment of the estimated positions onto the
+//! true ones (Umeyama 1991): rigid (SE(3)), and similarity (Sim(3), with its scale, for
+//! comparisons with a monocular-style estimate). The relative pose error (RPE) is
+//! evo's `rpe` over one frame: per consecutive pair, the error pose
+//! `inv(inv(E_i) E_{i+1}) inv(G_i) G_{i+1}`, its translation norm and rotation angle,
+//! RMS over the pairs. The final-position error is the distance between the last
+//! positions as a percentage of the path length.
 use crate::poses::KittiPose;
 use nalgebra::{Matrix3, Matrix4, Vector3};
 use serde::Serialize;
@@ -28,7 +34,7 @@ pub const DEVKIT_LENGTH_M: f64 = 100.0;
 
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum EvalError {
-    #[error("ground truth has {gt} poses but the estimate has {est}")]
+    #[error("ground truth has {gt} poses but the estimate has {est} (eval --common-prefix compares the poses both have)")]
     CountMismatch { gt: usize, est: usize },
     #[error("no poses to evaluate")]
     Empty,
@@ -58,6 +64,15 @@ pub struct Evaluation {
     pub per_length: Vec<LengthDrift>,
     /// RMS of position differences, metres, no alignment.
     pub ate_rmse_m: f64,
+    /// The same after the rigid (SE(3)) least-squares alignment of the positions.
+    pub ate_se3_rmse_m: f64,
+    /// The same after the similarity (Sim(3)) alignment, and that alignment's scale.
+    pub ate_sim3_rmse_m: f64,
+    pub sim3_scale: f64,
+    /// Relative pose error over one frame: RMS of the translation (m) and rotation (deg)
+    /// of the error poses of consecutive frames (None for a single frame).
+    pub rpe_translation_rmse_m: Option<f64>,
+    pub rpe_rotation_rmse_deg: Option<f64>,
     pub final_position_error_m: f64,
     /// Final-position error as % of the path length (None for a zero-length path).
     pub final_position_error_pct: Option<f64>,
@@ -172,6 +187,14 @@ pub fn evaluate(gt: &[KittiPose], est: &[KittiPose]) -> Result<Evaluation, EvalE
         .map(|(g, e)| (position(g) - position(e)).norm_squared())
         .sum();
     let final_err = (position(&gt[n - 1]) - position(&est[n - 1])).norm();
+    let (g, e): (Vec<Vector3<f64>>, Vec<Vector3<f64>>) = gt
+        .iter()
+        .zip(est)
+        .map(|(g, e)| (position(g), position(e)))
+        .unzip();
+    let (ate_se3, _) = aligned_rmse(&g, &e, false);
+    let (ate_sim3, sim3_scale) = aligned_rmse(&g, &e, true);
+    let (rpe_t, rpe_r) = relative_pose_error(&gm, &em);
     Ok(Evaluation {
         frames: n,
         path_length_m,
@@ -181,9 +204,69 @@ pub fn evaluate(gt: &[KittiPose], est: &[KittiPose]) -> Result<Evaluation, EvalE
         rotation_drift_deg_per_m: (count > 0).then(|| (r_sum / count as f64).to_degrees()),
         per_length,
         ate_rmse_m: (sq / n as f64).sqrt(),
+        ate_se3_rmse_m: ate_se3,
+        ate_sim3_rmse_m: ate_sim3,
+        sim3_scale,
+        rpe_translation_rmse_m: rpe_t,
+        rpe_rotation_rmse_deg: rpe_r,
         final_position_error_m: final_err,
         final_position_error_pct: (path_length_m > 0.0).then(|| final_err / path_length_m * 100.0),
     })
+}
+
+/// RMS of `est` aligned onto `gt` by least squares (Umeyama): rotation and translation,
+/// and a scale when `with_scale`; with the scale used (1 without).
+fn aligned_rmse(gt: &[Vector3<f64>], est: &[Vector3<f64>], with_scale: bool) -> (f64, f64) {
+    let n = gt.len() as f64;
+    let mean = |v: &[Vector3<f64>]| v.iter().sum::<Vector3<f64>>() / n;
+    let (mg, me) = (mean(gt), mean(est));
+    let cov: Matrix3<f64> = gt
+        .iter()
+        .zip(est)
+        .map(|(g, e)| (g - mg) * (e - me).transpose())
+        .sum::<Matrix3<f64>>()
+        / n;
+    let var_e = est.iter().map(|e| (e - me).norm_squared()).sum::<f64>() / n;
+    let svd = cov.svd(true, true);
+    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
+        return (f64::NAN, f64::NAN);
+    };
+    // A reflection is not a rotation: the smallest singular direction is flipped.
+    let mut d = Matrix3::identity();
+    if (u * v_t).determinant() < 0.0 {
+        d[(2, 2)] = -1.0;
+    }
+    let r = u * d * v_t;
+    let scale = if with_scale && var_e > 0.0 {
+        (Matrix3::from_diagonal(&svd.singular_values) * d).trace() / var_e
+    } else {
+        1.0
+    };
+    let t = mg - scale * r * me;
+    let sq: f64 = gt
+        .iter()
+        .zip(est)
+        .map(|(g, e)| (g - (scale * r * e + t)).norm_squared())
+        .sum();
+    ((sq / n).sqrt(), scale)
+}
+
+/// RMS translation (m) and rotation (deg) of the one-frame error poses.
+fn relative_pose_error(gm: &[Matrix4<f64>], em: &[Matrix4<f64>]) -> (Option<f64>, Option<f64>) {
+    let pairs = gm.len().saturating_sub(1);
+    if pairs == 0 {
+        return (None, None);
+    }
+    let (mut t, mut r) = (0.0, 0.0);
+    for i in 0..pairs {
+        let delta_gt = rigid_inverse(&gm[i]) * gm[i + 1];
+        let delta_est = rigid_inverse(&em[i]) * em[i + 1];
+        let err = rigid_inverse(&delta_est) * delta_gt;
+        t += err.fixed_view::<3, 1>(0, 3).norm_squared();
+        r += rotation_angle(&err).powi(2);
+    }
+    let rms = |s: f64| (s / pairs as f64).sqrt();
+    (Some(rms(t)), Some(rms(r).to_degrees()))
 }
 
 impl Evaluation {
@@ -213,6 +296,13 @@ impl Evaluation {
             "ATE RMSE:          {:.4} m (no alignment; both start at the identity)\n",
             self.ate_rmse_m
         );
+        s += &format!(
+            "ATE aligned:       {:.4} m rigid (SE(3)), {:.4} m similarity (Sim(3), scale {:.5})\n",
+            self.ate_se3_rmse_m, self.ate_sim3_rmse_m, self.sim3_scale
+        );
+        if let (Some(t), Some(r)) = (self.rpe_translation_rmse_m, self.rpe_rotation_rmse_deg) {
+            s += &format!("RPE (1 frame):     {t:.4} m, {r:.4} deg RMS\n");
+        }
         s += &format!(
             "final position:    {:.4} m = {} of the distance travelled\n",
             self.final_position_error_m,
@@ -349,6 +439,71 @@ mod tests {
                 e.final_position_error_pct
             ),
             (0, None, None)
+        );
+    }
+
+    /// A curve climbing gently: positions not on one line, so an alignment is determined.
+    fn curve(n: usize) -> Vec<KittiPose> {
+        (0..n)
+            .map(|i| {
+                let a = i as f64 * 0.05;
+                pose(a, [20.0 * a.sin(), -0.1 * i as f64, 20.0 * (1.0 - a.cos())])
+            })
+            .collect()
+    }
+
+    /// `p` moved by the similarity `x -> s R x + t` (R a rotation about KITTI x).
+    fn moved(p: &[KittiPose], s: f64, angle: f64, t: [f64; 3]) -> Vec<KittiPose> {
+        let r = nalgebra::Rotation3::from_axis_angle(&Vector3::x_axis(), angle);
+        p.iter()
+            .map(|q| {
+                let c = s * (r * position(q)) + Vector3::from(t);
+                let rot = r * Matrix3::from_fn(|i, j| q[i][j]);
+                let mut out = *q;
+                for i in 0..3 {
+                    for j in 0..3 {
+                        out[i][j] = rot[(i, j)];
+                    }
+                    out[i][3] = c[i];
+                }
+                out
+            })
+            .collect()
+    }
+
+    #[test]
+    fn alignment_takes_out_a_rigid_motion_and_a_scale() {
+        let gt = curve(60);
+        let rigid = moved(&gt, 1.0, 0.2, [3.0, -1.0, 2.0]);
+        let e = evaluate(&gt, &rigid).unwrap();
+        assert!(e.ate_rmse_m > 1.0, "{}", e.ate_rmse_m);
+        assert!(e.ate_se3_rmse_m < 1e-9 && e.ate_sim3_rmse_m < 1e-9, "{e:?}");
+        assert!((e.sim3_scale - 1.0).abs() < 1e-9);
+        // A relative error does not see where the trajectory is.
+        assert!(e.rpe_translation_rmse_m.unwrap() < 1e-9);
+        let scaled = moved(&gt, 1.1, -0.3, [1.0, 2.0, 0.0]);
+        let e = evaluate(&gt, &scaled).unwrap();
+        assert!(e.ate_se3_rmse_m > 0.1, "{e:?}");
+        assert!(e.ate_sim3_rmse_m < 1e-9, "{e:?}");
+        assert!((e.sim3_scale - 1.0 / 1.1).abs() < 1e-9, "{}", e.sim3_scale);
+    }
+
+    #[test]
+    fn the_relative_pose_error_is_the_error_of_each_step() {
+        // Every step 2 cm too long along the motion: RPE 0.02 m, no rotation error.
+        let gt = straight(30, 1.0);
+        let est = straight(30, 1.02);
+        let e = evaluate(&gt, &est).unwrap();
+        assert!(
+            (e.rpe_translation_rmse_m.unwrap() - 0.02).abs() < 1e-12,
+            "{e:?}"
+        );
+        assert!(e.rpe_rotation_rmse_deg.unwrap() < 1e-12);
+        assert_eq!(
+            evaluate(&gt[..1], &est[..1])
+                .unwrap()
+                .rpe_translation_rmse_m,
+            None
         );
     }
 }

@@ -1,4 +1,5 @@
-//! `phototraverse eval GT EST [--json OUT]`: KITTI-style drift, ATE RMSE and
+//! `phototraverse eval GT EST [--json OUT] [--common-prefix]`: KITTI-style drift, ATE
+//! (unaligned, and aligned rigidly and by a similarity), the relative pose error and the
 //! final-position error of an estimated trajectory (see [`crate::eval`]).
 use crate::eval::evaluate;
 use crate::poses::read_poses;
@@ -14,11 +15,27 @@ pub struct Args {
     /// Also write the evaluation as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Evaluate the poses both files have (the first min(n_gt, n_est)), for an estimate
+    /// of part of a sequence (a run stopped early, `--max-epochs`).
+    #[arg(long)]
+    pub common_prefix: bool,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let gt = read_poses(&args.gt)?;
-    let est = read_poses(&args.est)?;
+    let mut gt = read_poses(&args.gt)?;
+    let mut est = read_poses(&args.est)?;
+    if args.common_prefix && gt.len() != est.len() {
+        let n = gt.len().min(est.len());
+        println!(
+            "evaluating the first {n} poses ({} in {}, {} in {})",
+            gt.len(),
+            args.gt.display(),
+            est.len(),
+            args.est.display()
+        );
+        gt.truncate(n);
+        est.truncate(n);
+    }
     let e = evaluate(&gt, &est)
         .with_context(|| format!("{} vs {}", args.gt.display(), args.est.display()))?;
     print!("{}", e.summary());
