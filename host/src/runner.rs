@@ -13,6 +13,7 @@ use crate::eval::{evaluate, Evaluation};
 use crate::link::LinkOptions;
 use crate::pipeline::PipelineSettings;
 use crate::poses::{format_pose, KittiPose};
+use crate::report::colmap;
 use crate::report::{
     efoto_image_index, velocities, write_efoto, write_eop_csv, write_html, write_ply, CameraEop,
     EpochChi2, EpochRecord, EpochStatus, GnssRecord, MemoryLine, QualitySummary, RigReport,
@@ -396,20 +397,45 @@ impl<'d> Run<'d> {
     }
 
     /// E-Foto image index and file name of every image of the epochs processed.
+    /// The path of a dataset file relative to the dataset: distinct for the left and
+    /// right images of an epoch (`image_0/000000.png`, `image_1/000000.png`).
+    fn relative_name(&self, p: &Path) -> String {
+        p.strip_prefix(&self.ds.dir)
+            .unwrap_or(p)
+            .to_string_lossy()
+            .into_owned()
+    }
+
     fn image_names(&self) -> Vec<(usize, String)> {
-        let file = |p: &Path| {
-            p.file_name()
-                .map_or_else(|| p.display().to_string(), |n| n.to_string_lossy().into())
-        };
         self.report
             .epochs
             .iter()
             .filter_map(|r| self.ds.epochs.get(r.epoch).map(|e| (r.epoch, e)))
             .flat_map(|(i, e)| {
                 [
-                    (efoto_image_index(i, 0), file(&e.left)),
-                    (efoto_image_index(i, 1), file(&e.right)),
+                    (efoto_image_index(i, 0), self.relative_name(&e.left)),
+                    (efoto_image_index(i, 1), self.relative_name(&e.right)),
                 ]
+            })
+            .collect()
+    }
+
+    /// The images of the COLMAP model: both cameras of every epoch, named by their path
+    /// in the dataset.
+    fn model_images(&self) -> Vec<colmap::ModelImage> {
+        self.report
+            .epochs
+            .iter()
+            .filter_map(|r| self.ds.epochs.get(r.epoch).map(|e| (r, e)))
+            .flat_map(|(r, e)| {
+                [(0u8, &r.left, &e.left), (1, &r.right, &e.right)].map(|(camera, eop, file)| {
+                    colmap::ModelImage {
+                        id: efoto_image_index(r.epoch, camera) as u32,
+                        camera,
+                        name: self.relative_name(file),
+                        pose: eop.to_pose(),
+                    }
+                })
             })
             .collect()
     }
@@ -495,6 +521,15 @@ impl<'d> Run<'d> {
         self.report.residuals_px = self.ties.residuals_px();
         write_ply(&self.out.join("points.ply"), &points)?;
         write_efoto(&self.out.join("efoto"), &points, &self.image_names())?;
+        let image_id = |epoch: usize, camera: u8| efoto_image_index(epoch, camera) as u32;
+        let model = colmap::write_colmap(
+            &self.out.join("colmap"),
+            &self.rig,
+            &self.model_images(),
+            &points,
+            image_id,
+        )?;
+        self.report.colmap_rms_reprojection_px = Some(model.rms_reprojection_px);
         let json = serde_json::to_string_pretty(&self.report)?;
         std::fs::write(self.out.join("report.json"), json + "\n")?;
         write_html(&self.out.join("report.html"), &self.report)?;

@@ -143,7 +143,7 @@ fn run_writes_tie_points_efoto_and_the_residual_histogram() {
     assert_eq!(enh.lines().count(), ply.len());
     assert_eq!(images.lines().count(), 2 * FRAMES);
     assert!(
-        images.starts_with("1\t000000.png\n2\t000000.png\n"),
+        images.starts_with("1\timage_0/000000.png\n2\timage_1/000000.png\n"),
         "{images}"
     );
     // Every point has at least two measurements (it was intersected from a pair),
@@ -192,8 +192,35 @@ fn run_writes_tie_points_efoto_and_the_residual_histogram() {
         "reprojection median {median} px, p90 {p90} px"
     );
 
+    // The COLMAP model has every image once, named by its path in the dataset, and
+    // every exported measurement once in the tracks of its points.
+    let model = |f: &str| std::fs::read_to_string(out.join("colmap").join(f)).unwrap();
+    let data = |t: String| -> Vec<String> {
+        t.lines()
+            .filter(|l| !l.starts_with('#'))
+            .map(str::to_owned)
+            .collect()
+    };
+    let (cams, imgs, pts) = (
+        data(model("cameras.txt")),
+        data(model("images.txt")),
+        data(model("points3D.txt")),
+    );
+    assert_eq!(cams.len(), 2);
+    assert_eq!(imgs.len(), 2 * 2 * FRAMES);
+    assert!(
+        imgs[0].ends_with(" 1 image_0/000000.png") && imgs[2].ends_with(" 2 image_1/000000.png"),
+        "{}",
+        imgs[0]
+    );
+    assert_eq!(pts.len(), ply.len());
+    let track_total: usize = pts.iter().map(|l| (l.split(' ').count() - 8) / 2).sum();
+    assert_eq!(track_total, meas.lines().count());
+
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let model_rms = report["colmap_rms_reprojection_px"].as_f64().unwrap();
+    assert!(model_rms < 1.0, "COLMAP model RMS {model_rms} px");
     let residuals = report["residuals_px"].as_array().unwrap();
     // One residual per final observation: at least the exported measurements.
     assert!(

@@ -5,6 +5,7 @@
 //!
 //! The records are plain data filled by the run; every writer here only reads them.
 
+pub mod colmap;
 mod export;
 mod html;
 mod points;

@@ -256,6 +256,9 @@ pub struct RunReport {
     pub evaluation: Option<serde_json::Value>,
     /// Link statistics (bytes, retransmissions, errors).
     pub link: Option<serde_json::Value>,
+    /// RMS reprojection error of the COLMAP model written (`colmap/`), pixels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub colmap_rms_reprojection_px: Option<f64>,
     /// A signal (Ctrl-C, SIGTERM) stopped the run before the sequence's end: the outputs
     /// hold the epochs done.
     #[serde(default)]
