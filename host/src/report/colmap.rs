@@ -40,6 +40,14 @@ pub struct ModelImage {
     pub pose: Pose,
 }
 
+/// A point's track in the model: (image id, index among the image's points), with the
+/// mean reprojection error over it, pixels.
+struct Track<'a> {
+    point: &'a TiePoint,
+    elements: Vec<(u32, usize)>,
+    mean_error_px: f64,
+}
+
 /// What [`write_colmap`] wrote.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ColmapSummary {
@@ -120,7 +128,7 @@ pub fn write_colmap(
     let by_id: BTreeMap<u32, &ModelImage> = images.iter().map(|i| (i.id, i)).collect();
     // Each image's points (x, y, point id) in order; each point's track (image, index).
     let mut image_points: BTreeMap<u32, Vec<([f64; 2], u32)>> = BTreeMap::new();
-    let mut tracks: Vec<(&TiePoint, Vec<(u32, usize)>, f64)> = Vec::new();
+    let mut tracks: Vec<Track> = Vec::new();
     let (mut sum_sq, mut observations) = (0.0, 0usize);
     for p in points {
         let (mut track, mut err_sum) = (Vec::new(), 0.0);
@@ -144,8 +152,11 @@ pub fn write_colmap(
             observations += 1;
         }
         if !track.is_empty() {
-            let mean = err_sum / track.len() as f64;
-            tracks.push((p, track, mean));
+            tracks.push(Track {
+                point: p,
+                mean_error_px: err_sum / track.len() as f64,
+                elements: track,
+            });
         }
     }
     write_cameras(&dir.join("cameras.txt"), &interiors)?;
@@ -230,7 +241,7 @@ fn write_images(
     Ok(())
 }
 
-fn write_points(path: &Path, tracks: &[(&TiePoint, Vec<(u32, usize)>, f64)]) -> Result<()> {
+fn write_points(path: &Path, tracks: &[Track]) -> Result<()> {
     let mut w = create(path)?;
     writeln!(w, "# 3D point list with one line of data per point:")?;
     writeln!(
@@ -238,8 +249,13 @@ fn write_points(path: &Path, tracks: &[(&TiePoint, Vec<(u32, usize)>, f64)]) -> 
         "#   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)"
     )?;
     writeln!(w, "# Number of points: {}", tracks.len())?;
-    for (p, track, error) in tracks {
-        let t: Vec<String> = track.iter().map(|(i, k)| format!("{i} {k}")).collect();
+    for Track {
+        point: p,
+        elements,
+        mean_error_px: error,
+    } in tracks
+    {
+        let t: Vec<String> = elements.iter().map(|(i, k)| format!("{i} {k}")).collect();
         writeln!(
             w,
             "{} {:.6} {:.6} {:.6} 128 128 128 {:.6} {}",
