@@ -405,6 +405,85 @@ fn memory_table(lines: &[MemoryLine]) -> String {
     t
 }
 
+/// The evaluation (`crate::eval::Evaluation` as JSON) as two tables, rounded for reading.
+fn evaluation_table(ev: &serde_json::Value) -> String {
+    let num = |k: &str| ev.get(k).and_then(serde_json::Value::as_f64);
+    let fmt = |v: Option<f64>, digits: usize, unit: &str| {
+        v.map_or("n/a".to_string(), |v| format!("{v:.digits$} {unit}"))
+    };
+    let rows = [
+        (
+            "translation drift (KITTI segments)",
+            fmt(num("translation_drift_pct"), 3, "%"),
+        ),
+        (
+            "rotation drift",
+            fmt(num("rotation_drift_deg_per_m"), 4, "deg/m"),
+        ),
+        ("ATE, no alignment", fmt(num("ate_rmse_m"), 3, "m")),
+        (
+            "ATE, rigid alignment (SE(3))",
+            fmt(num("ate_se3_rmse_m"), 3, "m"),
+        ),
+        (
+            "ATE, similarity alignment (Sim(3))",
+            format!(
+                "{} (scale {})",
+                fmt(num("ate_sim3_rmse_m"), 3, "m"),
+                fmt(num("sim3_scale"), 5, "").trim()
+            ),
+        ),
+        (
+            "relative pose error, one frame",
+            format!(
+                "{}, {}",
+                fmt(num("rpe_translation_rmse_m"), 4, "m"),
+                fmt(num("rpe_rotation_rmse_deg"), 4, "deg")
+            ),
+        ),
+        (
+            "final position error",
+            format!(
+                "{} ({} of the path)",
+                fmt(num("final_position_error_m"), 3, "m"),
+                fmt(num("final_position_error_pct"), 3, "%")
+            ),
+        ),
+        ("path length", fmt(num("path_length_m"), 1, "m")),
+    ];
+    let mut t = String::from("<table>");
+    for (name, value) in rows {
+        let _ = write!(
+            t,
+            "<tr><th style=\"text-align:left\">{name}</th><td>{}</td></tr>",
+            value.trim()
+        );
+    }
+    t.push_str("</table><p>Drift per segment length:</p><table><tr><th>length (m)</th><th>segments</th><th>translation (%)</th><th>rotation (deg/m)</th></tr>");
+    for l in ev
+        .get("per_length")
+        .and_then(|v| v.as_array())
+        .into_iter()
+        .flatten()
+    {
+        let f = |k: &str| {
+            l.get(k)
+                .and_then(serde_json::Value::as_f64)
+                .unwrap_or(f64::NAN)
+        };
+        let _ = write!(
+            t,
+            "<tr><td>{:.1}</td><td>{}</td><td>{:.3}</td><td>{:.4}</td></tr>",
+            f("length_m"),
+            f("segments"),
+            f("translation_pct"),
+            f("rotation_deg_per_m")
+        );
+    }
+    t.push_str("</table>");
+    t
+}
+
 fn html_escape(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
@@ -506,8 +585,20 @@ pub fn write_html(path: &Path, report: &RunReport) -> Result<()> {
     if let Some(ev) = &report.evaluation {
         let _ = write!(
             page,
-            "<h2>Evaluation</h2><pre>{}</pre>",
-            html_escape(&serde_json::to_string_pretty(ev)?)
+            "<h2>Evaluation against the ground truth</h2>{}",
+            evaluation_table(ev)
+        );
+    }
+    if let Some(m) = &report.smoothing {
+        let _ = write!(
+            page,
+            "<p>GNSS: the positions are smoothed over {} fixes after the run (the images' \
+             step estimated at {:.1} mm); they moved {:.3} m RMS, {:.3} m at most from those \
+             output on board.</p>",
+            m.fixes,
+            m.step_sd_m * 1e3,
+            m.rms_shift_m,
+            m.largest_shift_m
         );
     }
     for (title, svg) in sections {
