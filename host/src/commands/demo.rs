@@ -74,7 +74,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let outcome = run_dataset(&ds, &results, &run)?;
     print!("{}", summary(&outcome));
     println!(
-        "wrote poses.txt, eop.csv, points.ply, efoto/, report.json and report.html in {}",
+        "wrote poses.txt, eop.csv, points.ply, efoto/, colmap/, report.json and report.html in {}",
         results.display()
     );
     crate::interrupt::exit_if_interrupted(&outcome, ds.len());
