@@ -100,6 +100,12 @@ fn synth_then_eval() {
     assert!((t_err - expect).abs() < 0.01, "{t_err} vs {expect}");
     // Vibration makes the path a little longer than the chord.
     assert!((v["final_position_error_pct"].as_f64().unwrap() - 1.0).abs() < 2e-3);
+    // A similarity alignment takes the scale error out, and finds it.
+    assert!(v["ate_sim3_rmse_m"].as_f64().unwrap() < 1e-9, "{v}");
+    assert!(
+        (v["sim3_scale"].as_f64().unwrap() - 1.0 / 1.01).abs() < 1e-9,
+        "{v}"
+    );
 
     // Different pose counts are an error.
     write_poses(&est, &scaled[..3]).unwrap();
@@ -107,6 +113,24 @@ fn synth_then_eval() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr)
         .contains("ground truth has 4 poses but the estimate has 3"));
+    // Unless the common prefix is asked for; with the plots.
+    let plots = t.path().join("plots");
+    let out = ok(&[
+        "eval",
+        gt_path.to_str().unwrap(),
+        est.to_str().unwrap(),
+        "--common-prefix",
+        "--plots",
+        plots.to_str().unwrap(),
+    ]);
+    assert!(out.contains("evaluating the first 3 poses"), "{out}");
+    for f in ["trajectory", "error", "drift_translation", "drift_rotation"] {
+        let svg = std::fs::read_to_string(plots.join(format!("{f}.svg"))).unwrap();
+        assert!(
+            svg.starts_with("<svg") && svg.contains("polyline"),
+            "{f}.svg"
+        );
+    }
 }
 
 #[test]

@@ -16,9 +16,9 @@ const PALETTE: [RGBColor; 6] = [
 ];
 
 /// One named polyline of a chart.
-struct Series {
-    name: String,
-    points: Vec<(f64, f64)>,
+pub(crate) struct Series {
+    pub(crate) name: String,
+    pub(crate) points: Vec<(f64, f64)>,
 }
 
 fn bounds(series: &[Series], equal_aspect: bool) -> (std::ops::Range<f64>, std::ops::Range<f64>) {
@@ -63,7 +63,14 @@ enum Mark {
     Dots,
 }
 
-fn line_chart(title: &str, xl: &str, yl: &str, series: &[Series], equal: bool) -> Result<String> {
+/// An SVG chart of `series` as lines (`equal`: one scale on both axes).
+pub(crate) fn line_chart(
+    title: &str,
+    xl: &str,
+    yl: &str,
+    series: &[Series],
+    equal: bool,
+) -> Result<String> {
     chart(title, (xl, yl), series, equal, Mark::Lines)
 }
 
@@ -344,6 +351,37 @@ fn per_epoch(
 
 /// Distance travelled along the ground truth at each epoch, and the estimate's
 /// position error as a percentage of it.
+/// The KITTI drift against segment length (`crate::eval::Evaluation::per_length` as
+/// JSON): translation (%) and rotation (deg/m) charts, as the devkit plots them.
+pub(crate) fn drift_per_length_charts(per_length: &[serde_json::Value]) -> Result<[String; 2]> {
+    let series = |key: &str, name: &str| {
+        [Series {
+            name: name.into(),
+            points: per_length
+                .iter()
+                .filter(|l| l.get("segments").and_then(|v| v.as_u64()).unwrap_or(0) > 0)
+                .filter_map(|l| Some((l.get("length_m")?.as_f64()?, l.get(key)?.as_f64()?)))
+                .collect(),
+        }]
+    };
+    Ok([
+        line_chart(
+            "Translation drift against segment length",
+            "segment length (m)",
+            "translation error (%)",
+            &series("translation_pct", "translation drift"),
+            false,
+        )?,
+        line_chart(
+            "Rotation drift against segment length",
+            "segment length (m)",
+            "rotation error (deg/m)",
+            &series("rotation_deg_per_m", "rotation drift"),
+            false,
+        )?,
+    ])
+}
+
 fn drift_series(report: &RunReport) -> Option<Vec<(f64, f64)>> {
     let gt = report.ground_truth.as_ref()?;
     let mut dist = 0.0;
@@ -506,14 +544,33 @@ pub fn write_html(path: &Path, report: &RunReport) -> Result<()> {
         "Trajectory seen from above",
         line_chart("Trajectory (top view)", "X (m)", "Y (m)", &trajectory, true)?,
     )];
+    let per_length = report
+        .evaluation
+        .as_ref()
+        .and_then(|e| e.get("per_length"))
+        .and_then(|v| v.as_array());
+    if let Some(per_length) = per_length {
+        let [translation, rotation] = drift_per_length_charts(per_length)?;
+        sections.push((
+            "KITTI drift against segment length: translation",
+            translation,
+        ));
+        sections.push(("KITTI drift against segment length: rotation", rotation));
+    }
     if let Some(drift) = drift_series(report) {
         let s = [Series {
-            name: "position error / distance".into(),
+            name: "position error / distance travelled".into(),
             points: drift,
         }];
         sections.push((
-            "Drift against distance",
-            line_chart("Drift", "distance (m)", "error (%)", &s, false)?,
+            "Position error over the distance travelled",
+            line_chart(
+                "Position error as a share of the distance",
+                "distance (m)",
+                "error (%)",
+                &s,
+                false,
+            )?,
         ));
     }
     let sigma0 = [Series {

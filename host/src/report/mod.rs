@@ -7,7 +7,7 @@
 
 pub mod colmap;
 mod export;
-mod html;
+pub(crate) mod html;
 mod points;
 mod records;
 mod velocity;
