@@ -1,0 +1,257 @@
+//! What the window holds after a solution: poses, points, their covariances (relative to
+//! the fixed past and with respect to the datum), residuals and the rig.
+use super::*;
+
+impl<'a> Window<'a> {
+    pub fn n_epochs(&self) -> usize {
+        self.n_epochs
+    }
+
+    /// Id of the epoch in slot `i` (0 = oldest).
+    pub fn epoch_id(&self, i: usize) -> Option<u32> {
+        (i < self.n_epochs).then(|| self.epochs[i].id)
+    }
+
+    /// Adjusted (or current) pose of the left camera of slot `i`, object coordinates.
+    pub fn epoch_pose(&self, i: usize) -> Option<Pose> {
+        if i >= self.n_epochs {
+            return None;
+        }
+        let mut p = self.epochs[i].params;
+        for a in 0..3 {
+            p[3 + a] += self.origin[a];
+        }
+        Some(Pose::from_params(&p))
+    }
+
+    /// Standard deviations of slot `i` (omega, phi, kappa rad; X, Y, Z m) from the last solution.
+    pub fn epoch_std(&self, i: usize) -> Option<[f64; 6]> {
+        if i >= self.n_epochs || self.epochs[i].flags & EP_COV == 0 {
+            return None;
+        }
+        let c = &self.epochs[i].cov;
+        let mut s = [0.0; 6];
+        for (k, sk) in s.iter_mut().enumerate() {
+            *sk = libm::sqrt(c[k * 6 + k].max(0.0));
+        }
+        Some(s)
+    }
+
+    /// 6x6 covariance of slot `i` with respect to the datum (row-major, sigma0^2
+    /// scaled). The window's own covariance ([`Self::epoch_covariance`]) holds the
+    /// fixed epochs exact, so it is the precision relative to the poses that left; the
+    /// newest fixed epoch's absolute covariance, carried rigidly to the epoch (its
+    /// rotation error turns the epoch's offset from it), adds what they were uncertain
+    /// by. Each fixed epoch keeps the absolute covariance it left with, so the
+    /// uncertainty of a traverse without fixes accumulates step by step, as it should.
+    pub fn epoch_absolute_covariance(&self, i: usize) -> Option<[f64; 36]> {
+        let cov = self.epoch_covariance(i)?;
+        Some(self.plus_anchor(i, cov))
+    }
+
+    /// `cov` (of slot `i`, relative to the fixed epochs) plus the newest fixed epoch's
+    /// absolute covariance carried rigidly to the slot: `cov + J C_a J^T`.
+    pub(super) fn plus_anchor(&self, i: usize, mut cov: [f64; 36]) -> [f64; 36] {
+        let Some(anchor) = self.n_fixed.checked_sub(1).map(|a| &self.fixed[a]) else {
+            return cov;
+        };
+        let j = rigid_transport(&anchor.params, &self.epochs[i].params);
+        let mut jc = [0.0; 36];
+        for r in 0..6 {
+            for c in 0..6 {
+                jc[r * 6 + c] = (0..6).map(|k| j[r * 6 + k] * anchor.cov[k * 6 + c]).sum();
+            }
+        }
+        for r in 0..6 {
+            for c in 0..6 {
+                cov[r * 6 + c] += (0..6).map(|k| jc[r * 6 + k] * j[c * 6 + k]).sum::<f64>();
+            }
+        }
+        cov
+    }
+
+    /// The absolute covariance a leaving (oldest) epoch keeps as a fixed epoch: its
+    /// window covariance at no less than its a-priori value (sigma0 = 1), plus the
+    /// anchor's. The a-posteriori scale comes from residuals that do not see the errors
+    /// a traverse accumulates, which are correlated from epoch to epoch (the same points
+    /// on the same surfaces), so below 1 it would make the accumulated precision
+    /// optimistic. Only the step's own part is scaled: the anchor's was, at its slide
+    /// (scaling the sum compounded the scale at every slide).
+    pub(super) fn leaving_covariance(&self) -> Option<[f64; 36]> {
+        let k = self.apriori_floor();
+        let cov = self.epoch_covariance(0)?.map(|v| v * k);
+        Some(self.plus_anchor(0, cov))
+    }
+
+    /// The factor that raises the last solution's covariances to no less than their
+    /// a-priori value: `1 / sigma0^2` when sigma0 is below 1, else 1.
+    pub(super) fn apriori_floor(&self) -> f64 {
+        if self.cov_s02 > 0.0 && self.cov_s02 < 1.0 {
+            1.0 / self.cov_s02
+        } else {
+            1.0
+        }
+    }
+
+    /// Standard deviations of slot `i` relative to the recent past (the fixed epochs held
+    /// exact), at no less than their a-priori value, as a fixed epoch keeps them
+    /// ([`Self::leaving_covariance`]): what a difference of neighbouring epochs is
+    /// uncertain by.
+    pub fn epoch_relative_std(&self, i: usize) -> Option<[f64; 6]> {
+        let k = libm::sqrt(self.apriori_floor());
+        Some(self.epoch_std(i)?.map(|v| v * k))
+    }
+
+    /// Standard deviations of slot `i` with respect to the datum (omega, phi, kappa
+    /// rad; X, Y, Z m): [`Self::epoch_absolute_covariance`].
+    pub fn epoch_absolute_std(&self, i: usize) -> Option<[f64; 6]> {
+        let c = self.epoch_absolute_covariance(i)?;
+        Some(core::array::from_fn(|k| libm::sqrt(c[k * 6 + k].max(0.0))))
+    }
+
+    /// 6x6 covariance (row-major) of slot `i` from the last solution (sigma0^2 scaled).
+    pub fn epoch_covariance(&self, i: usize) -> Option<[f64; 36]> {
+        (i < self.n_epochs && self.epochs[i].flags & EP_COV != 0).then(|| self.epochs[i].cov)
+    }
+
+    /// Adjusted point in object coordinates; `None` when unknown or excluded.
+    pub fn point(&self, point: u32) -> Option<[f64; 3]> {
+        let p = self.point_slot(point).ok()?;
+        let s = &self.points[p];
+        if s.flags & PT_EXCLUDED != 0 {
+            return None;
+        }
+        Some([
+            s.xyz[0] + self.origin[0],
+            s.xyz[1] + self.origin[1],
+            s.xyz[2] + self.origin[2],
+        ])
+    }
+
+    /// Standard deviations of a point, metres.
+    pub fn point_std(&self, point: u32) -> Option<[f64; 3]> {
+        let p = self.point_slot(point).ok()?;
+        (self.points[p].flags & PT_EXCLUDED == 0).then(|| self.points[p].std)
+    }
+
+    /// Whether a point was left out of the last solution.
+    pub fn point_excluded(&self, point: u32) -> bool {
+        self.point_slot(point)
+            .map(|p| self.points[p].flags & PT_EXCLUDED != 0)
+            .unwrap_or(true)
+    }
+
+    pub fn rig(&self) -> RigParams {
+        self.rig
+    }
+
+    /// Standard deviations of the rig parameters (zero when fixed).
+    pub fn rig_std(&self) -> [f64; 6] {
+        self.rig_std
+    }
+
+    /// Interior orientation corrections `[x0_L, y0_L, f_L, x0_R, y0_R, f_R]` (mm)
+    /// found by the self-calibration (zero without it).
+    pub fn interior(&self) -> InteriorCorrections {
+        self.interior
+    }
+
+    /// Standard deviations of [`Self::interior`] (zero without self-calibration).
+    pub fn interior_std(&self) -> [f64; 6] {
+        self.interior_std
+    }
+
+    pub fn observations(&self) -> &[Observation] {
+        &self.obs[..self.n_obs]
+    }
+
+    /// Indices (into [`Window::observations`]) of point slot `p`'s observations, from
+    /// the index of the last adjustment; `None` when observations came or went since.
+    pub fn point_observations(&self, p: u32) -> Option<&[u32]> {
+        let p = p as usize;
+        if !self.indexed.is_some_and(|np| p < np) {
+            return None;
+        }
+        let (s0, s1) = (
+            self.point_start[p] as usize,
+            self.point_start[p + 1] as usize,
+        );
+        self.obs_order.get(s0..s1)
+    }
+
+    /// Observations flagged as blunders, with their indices.
+    pub fn flagged(&self) -> impl Iterator<Item = (usize, &Observation)> {
+        self.observations()
+            .iter()
+            .enumerate()
+            .filter(|(_, o)| o.is_flagged())
+    }
+
+    /// Residuals `observed - computed` (mm) of an observation at the current state.
+    pub fn residual(&self, index: usize) -> Option<[f64; 2]> {
+        let o = self.obs.get(index).filter(|_| index < self.n_obs)?;
+        let at = self.locate(o.epoch)?;
+        let p = self.params_at(at);
+        let ml = crate::camera::rotation(p[0], p[1], p[2]);
+        self.residual_with(o, &ml, &p, &self.rig_rotation())
+    }
+
+    /// [`Self::residual`] of every observation in order: the rotations computed once
+    /// per epoch's run of observations rather than once per observation.
+    pub fn residuals(&self) -> impl Iterator<Item = Option<[f64; 2]>> + '_ {
+        let mr = self.rig_rotation();
+        let mut last: Option<(u32, Matrix3<f64>, [f64; 6])> = None;
+        self.obs[..self.n_obs].iter().map(move |o| {
+            let (ml, p) = match last {
+                Some((e, ml, p)) if e == o.epoch => (ml, p),
+                _ => {
+                    let p = self.params_at(self.locate(o.epoch)?);
+                    let ml = crate::camera::rotation(p[0], p[1], p[2]);
+                    last = Some((o.epoch, ml, p));
+                    (ml, p)
+                }
+            };
+            self.residual_with(o, &ml, &p, &mr)
+        })
+    }
+
+    /// The rig's relative rotation `M` from its current angles.
+    pub(super) fn rig_rotation(&self) -> Matrix3<f64> {
+        let a = self.rig.angles;
+        crate::camera::rotation(a[0], a[1], a[2])
+    }
+
+    /// Residual of `o` with its epoch's rotation `ml` and parameters `p`, the rig's `mr`.
+    pub(super) fn residual_with(
+        &self,
+        o: &Observation,
+        ml: &Matrix3<f64>,
+        p: &[f64; 6],
+        mr: &Matrix3<f64>,
+    ) -> Option<[f64; 2]> {
+        let cam = Camera::from_index(o.camera)?;
+        let f = corrected_focal(self.focal, cam, &self.interior);
+        let point = &self.points[o.point as usize].xyz;
+        let centre = [p[3], p[4], p[5]];
+        let xy = project_xy_with(ml, &centre, mr, &self.rig.base, cam, f, point)?;
+        let xy = shift_principal_point(xy, cam, &self.interior);
+        Some([o.xy[0] as f64 - xy[0], o.xy[1] as f64 - xy[1]])
+    }
+
+    /// Items refused because a capacity was full: (points, observations).
+    pub fn dropped(&self) -> (usize, usize) {
+        (self.dropped_points, self.dropped_observations)
+    }
+
+    /// Slot of the epoch found undetermined by the last failed solution.
+    pub fn singular_epoch(&self) -> Option<usize> {
+        self.singular_epoch
+    }
+
+    /// The window's local origin (object coordinates).
+    pub fn origin(&self) -> [f64; 3] {
+        self.origin
+    }
+
+    // ----- sliding -----
+}

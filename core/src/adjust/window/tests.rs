@@ -1,0 +1,320 @@
+//! Internal checks: the assembled normal equations against numerical
+//! gradients of `vTPv` (constraints and rig chain included).
+extern crate std;
+use super::*;
+use crate::camera::Interior;
+use std::vec;
+
+/// Loose datum and a velocity constraint that every step pulls: the constraint
+/// tests move the poses away from them to see each one's gradient.
+fn sigmas() -> ConstraintSigmas {
+    ConstraintSigmas {
+        datum_angle_rad: 0.01,
+        datum_position_m: 0.01,
+        velocity_change_mps: 0.3,
+        ..ConstraintSigmas::default()
+    }
+}
+
+/// Without points the reduced system is the full one: `rhs = -1/2 grad vTPv`.
+#[test]
+fn constraint_normal_equations_match_numerical_gradient() {
+    let cam = Interior::pinhole_px(1000, 800, 900.0);
+    let mut rig = Rig::rectified(cam, 0.5);
+    rig.relative_angles = [0.01, -0.02, 0.005];
+    rig.base_m = [0.5, 0.01, -0.02];
+    let cfg = AdjustConfig {
+        window: 4,
+        estimate_rig: true,
+        self_calibration: Some(InteriorSigmas {
+            principal_point_mm: [0.01, 0.02],
+            focal_mm: [0.03, 0.04],
+        }),
+        sigmas: ConstraintSigmas {
+            base_length_m: 0.002,
+            ..sigmas()
+        },
+        ..AdjustConfig::default()
+    };
+    let mut mem = vec![0u8; 1 << 20];
+    let mut arena = Arena::new(&mut mem);
+    let mut w = Window::new(cfg, &rig, &mut arena).unwrap();
+    w.set_base_length(0.49);
+    for k in 0..4 {
+        let pose = Pose::from_degrees(
+            90.0 + k as f64,
+            0.5 * k as f64,
+            -0.3,
+            [0.1 * k as f64, 1.1 * k as f64, 0.02],
+        );
+        let id = w
+            .add_epoch(&pose, 0.5 * k as f64 + 0.01 * (k * k) as f64)
+            .unwrap();
+        w.set_gnss(id, [0.05, 1.0 * k as f64, 0.0], 0.3).unwrap();
+        if k > 0 {
+            w.set_odometer(id, 1.0, 0.05).unwrap();
+        }
+    }
+    // Move away from the priors so every residual is non-zero.
+    w.epochs[0].params[0] += 0.001;
+    w.epochs[0].params[4] += 0.002;
+    w.rig = RigParams::from_array(&[0.012, -0.018, 0.004, 0.51, 0.012, -0.019]);
+    w.interior = [0.003, -0.002, 0.01, -0.004, 0.001, -0.02];
+    assert_rhs_is_the_numerical_gradient(&mut w);
+}
+
+/// `rhs = -1/2 grad vTPv` of every camera, rig and interior parameter, by central
+/// differences (a window without points).
+fn assert_rhs_is_the_numerical_gradient(w: &mut Window) {
+    w.build_index();
+    w.build(0.0);
+    let nc = w.n_cam();
+    let rhs: std::vec::Vec<f64> = w.rhs[..nc].to_vec();
+    for i in 0..nc {
+        let h = 1e-6;
+        let (blk, k) = (i / 6, i % 6);
+        let val = |w: &mut Window, d: f64| {
+            if blk < w.n_epochs {
+                w.epochs[blk].params[k] += d;
+            } else if Some(blk) == w.rig_block() {
+                let mut r = w.rig.to_array();
+                r[k] += d;
+                w.rig = RigParams::from_array(&r);
+            } else {
+                w.interior[k] += d;
+            }
+        };
+        val(w, h);
+        let cp = w.cost().0;
+        val(w, -2.0 * h);
+        let cm = w.cost().0;
+        val(w, h);
+        let num = -(cp - cm) / (2.0 * h) / 2.0;
+        let tol = 1e-5 * (1.0 + num.abs().max(rhs[i].abs()));
+        assert!(
+            (num - rhs[i]).abs() <= tol,
+            "param {i}: analytic {} numeric {num}",
+            rhs[i]
+        );
+    }
+}
+
+/// The smoothness reaches back over the window's edge to the fixed epochs
+/// (constants), in the camera's frame: its equations count once per epoch from
+/// the third counted from the oldest fixed one, and their gradient is exact.
+#[test]
+fn smoothness_spans_the_window_edge() {
+    use core::f64::consts::FRAC_PI_2;
+    let cam = Interior::pinhole_px(1000, 800, 900.0);
+    let rig = Rig::rectified(cam, 0.5);
+    let cfg = AdjustConfig {
+        window: 3,
+        fixed_epochs: 2,
+        sigmas: sigmas(),
+        ..AdjustConfig::default()
+    };
+    let mut mem = vec![0u8; 1 << 20];
+    let mut arena = Arena::new(&mut mem);
+    let mut w = Window::new(cfg, &rig, &mut arena).unwrap();
+    // A turn of constant rate and speed: the smoothness holds exactly.
+    let pose = |k: usize| {
+        let heading = 0.1 * k as f64;
+        let r = 20.0;
+        let centre = [r * (1.0 - libm::cos(heading)), r * libm::sin(heading), 1.5];
+        Pose::from_params(&[FRAC_PI_2, -heading, 0.0, centre[0], centre[1], centre[2]])
+    };
+    for k in 0..6 {
+        if w.n_epochs == 3 {
+            w.slide().unwrap();
+        }
+        w.add_epoch(&pose(k), 0.1 * k as f64).unwrap();
+    }
+    assert_eq!((w.n_fixed, w.n_epochs), (2, 3));
+    w.build_index();
+    let (cost, count) = w.add_constraints(false);
+    // The carried prior (6) and three smoothness triples over 2 fixed + 3 window epochs.
+    assert_eq!(count, 6 + 3 * 3);
+    assert!(cost < 1e-16, "a steady turn costs {cost}");
+    // Speed up the newest epoch and turn the first window epoch: every triple pulls.
+    w.epochs[2].params[4] += 0.05;
+    w.epochs[0].params[2] += 0.002;
+    w.epochs[1].params[3] -= 0.01;
+    assert_rhs_is_the_numerical_gradient(&mut w);
+}
+
+/// One Gauss-Newton step through the Schur complement (rig estimated,
+/// constraints on) leaves a gradient of `vTPv` (by central differences over
+/// every camera, rig and point parameter) orders of magnitude smaller: the
+/// Jacobians, the elimination and the back-substitution agree.
+#[test]
+fn schur_step_zeroes_the_numerical_gradient() {
+    use crate::adjust::tests::{load, scene};
+    let s = scene(71, 3, 12, 0.0);
+    let cfg = AdjustConfig {
+        window: 3,
+        max_points: 12,
+        max_observations: s.obs.len(),
+        estimate_rig: true,
+        self_calibration: Some(InteriorSigmas {
+            principal_point_mm: [0.02, 0.02],
+            focal_mm: [0.05, 0.05],
+        }),
+        robust: Robust::None,
+        sigmas: ConstraintSigmas {
+            datum_angle_rad: 1e-3,
+            datum_position_m: 1e-3,
+            base_length_m: 0.01,
+            velocity_change_mps: 1.0,
+            ..ConstraintSigmas::default()
+        },
+        ..AdjustConfig::default()
+    };
+    let mut b = MemoryBudget::new();
+    cfg.budget(&mut b);
+    let mut mem = vec![0u8; b.total()];
+    let mut arena = Arena::new(&mut mem);
+    let (mut w, _) = load(&s, cfg, &mut arena, 72);
+    w.set_gnss(2, s.poses[2].centre, 0.05).unwrap();
+    w.build_index();
+    let _ = w.classify_points();
+    // Start close to the optimum so one step is (nearly) the whole way.
+    for _ in 0..3 {
+        w.step(0.0).unwrap();
+    }
+    for e in 1..3 {
+        w.epochs[e].params[0] += 2e-4;
+        w.epochs[e].params[4] += 3e-3;
+    }
+    let mut r = w.rig.to_array();
+    r[1] += 1e-4;
+    r[3] += 2e-3;
+    w.rig = RigParams::from_array(&r);
+    w.interior[1] += 4e-4;
+    w.interior[5] -= 2e-3;
+    for p in 0..w.n_point_slots {
+        w.points[p].xyz[1] += 5e-3;
+    }
+    let grad_norm = |w: &mut Window| -> f64 {
+        let mut sum = 0.0;
+        let h = 1e-7;
+        let n_cam = w.n_cam();
+        for i in 0..n_cam + 3 * w.n_point_slots {
+            let bump = |w: &mut Window, d: f64| {
+                if i < 6 * w.n_epochs {
+                    w.epochs[i / 6].params[i % 6] += d;
+                } else if i < 6 * w.n_epochs + 6 {
+                    let mut r = w.rig.to_array();
+                    r[i - 6 * w.n_epochs] += d;
+                    w.rig = RigParams::from_array(&r);
+                } else if i < n_cam {
+                    w.interior[i - 6 * w.n_epochs - 6] += d;
+                } else {
+                    let k = i - n_cam;
+                    w.points[k / 3].xyz[k % 3] += d;
+                }
+            };
+            bump(w, h);
+            let cp = w.cost().0;
+            bump(w, -2.0 * h);
+            let cm = w.cost().0;
+            bump(w, h);
+            let g = (cp - cm) / (2.0 * h);
+            sum += g * g;
+        }
+        libm::sqrt(sum)
+    };
+    let before = grad_norm(&mut w);
+    w.step(0.0).unwrap();
+    let after = grad_norm(&mut w);
+    assert!(after < 1e-3 * before, "gradient {before} -> {after}");
+}
+
+/// The rigid transport against moving both poses numerically: a small rotation
+/// about the first pose's centre (object frame) and a shift.
+#[test]
+fn rigid_transport_matches_a_rigid_motion_of_both_poses() {
+    use crate::camera::{angles_from_rotation, rotation};
+    let from = [1.62, 0.05, -0.1, 1.0, 2.0, 3.0];
+    let to = [1.5, -0.02, 0.3, 5.0, 20.0, 1.0];
+    let j = rigid_transport(&from, &to);
+    let e_from = angle_rates(&from);
+    let h = 1e-6;
+    for axis in 0..6 {
+        // The motion: a rotation vector (object frame) or a shift, size h.
+        let mut d = Vector3::zeros();
+        let mut shift = Vector3::zeros();
+        if axis < 3 {
+            d[axis] = h;
+        } else {
+            shift[axis - 3] = h;
+        }
+        let turn = nalgebra::Rotation3::new(d).into_inner();
+        let moved = |p: &[f64; 6]| {
+            let r = rotation(p[0], p[1], p[2]).transpose();
+            let c = Vector3::new(p[3], p[4], p[5]) - Vector3::new(from[3], from[4], from[5]);
+            let m = (turn * r).transpose();
+            let a = angles_from_rotation(&m);
+            let c = turn * c + Vector3::new(from[3], from[4], from[5]) + shift;
+            [a[0], a[1], a[2], c[0], c[1], c[2]]
+        };
+        let (f2, t2) = (moved(&from), moved(&to));
+        let df: [f64; 6] = core::array::from_fn(|k| f2[k] - from[k]);
+        let dt: [f64; 6] = core::array::from_fn(|k| t2[k] - to[k]);
+        // The angles' change of `from` is the rotation vector through E.
+        let da = e_from.try_inverse().unwrap() * d;
+        for k in 0..3 {
+            assert!((df[k] - da[k]).abs() < 1e-9, "axis {axis}: E");
+        }
+        for r in 0..6 {
+            let predicted: f64 = (0..6).map(|k| j[r * 6 + k] * df[k]).sum();
+            assert!(
+                (predicted - dt[r]).abs() < 1e-3 * h,
+                "axis {axis}, row {r}: {predicted} against {}",
+                dt[r]
+            );
+        }
+    }
+}
+
+/// The GNSS residual's angle derivatives (the lever arm turning with the camera)
+/// against numerical differentiation.
+#[test]
+fn gnss_lever_arm_jacobian_matches_numeric() {
+    let slot = |p: [f64; 6]| {
+        let mut e: EpochSlot = bytemuck::Zeroable::zeroed();
+        e.params = p;
+        e.rot = Rotations::new(p[0], p[1], p[2]);
+        e.gnss = [1.0, 2.0, 3.0];
+        e.gnss_lever = [0.3, 1.1, -0.7];
+        e
+    };
+    // The default datum (omega 90 deg: the camera's y is the object's Z, its z the
+    // object's -Y): an antenna 1.2 m up and 0.5 m behind the camera.
+    let mut level = slot([core::f64::consts::FRAC_PI_2, 0.0, 0.0, 1.0, 2.0, 3.0]);
+    level.gnss_lever = [0.0, 1.2, 0.5];
+    let (r, _) = gnss_residual(&level);
+    assert!(
+        r[0].abs() < 1e-12 && (r[1] + 0.5).abs() < 1e-12 && (r[2] - 1.2).abs() < 1e-12,
+        "{r:?}"
+    );
+    let p = [1.55, 0.2, -0.4, 1.0, 2.5, 2.0];
+    let (r0, j) = gnss_residual(&slot(p));
+    // At zero lever the residual is the centre's offset from the fix.
+    let mut plain = slot(p);
+    plain.gnss_lever = [0.0; 3];
+    assert_eq!(gnss_residual(&plain).0, [0.0, 0.5, -1.0]);
+    let h = 1e-7;
+    for k in 0..3 {
+        let mut q = p;
+        q[k] += h;
+        let (r1, _) = gnss_residual(&slot(q));
+        for a in 0..3 {
+            let numeric = (r1[a] - r0[a]) / h;
+            assert!(
+                (numeric - j[a][k]).abs() < 1e-6,
+                "d r{a} / d angle {k}: {numeric} against {}",
+                j[a][k]
+            );
+        }
+    }
+}
