@@ -732,14 +732,27 @@ mod tests {
             predicted_bytes: 10,
             measured_bytes: Some(9),
         }];
+        report.evaluation = Some(serde_json::json!({
+            "translation_drift_pct": 0.25,
+            "ate_rmse_m": 0.0123456,
+            "per_length": [
+                {"length_m": 1.0, "segments": 2, "translation_pct": 0.5, "rotation_deg_per_m": 0.01},
+                {"length_m": 2.0, "segments": 1, "translation_pct": 0.25, "rotation_deg_per_m": 0.005},
+            ],
+        }));
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("report.html");
         write_html(&path, &report).unwrap();
         let page = std::fs::read_to_string(&path).unwrap();
-        assert_eq!(page.matches("<svg").count(), 6);
+        assert_eq!(page.matches("<svg").count(), 8);
+        // The evaluation as tables rounded for reading, not as JSON.
+        assert!(page.contains("<td>0.250 %</td>") && page.contains("<td>0.012 m</td>"));
+        assert!(!page.contains("0.0123456"));
         for title in [
             "Trajectory",
-            "Drift",
+            "KITTI drift against segment length: translation",
+            "KITTI drift against segment length: rotation",
+            "Position error over the distance travelled",
             "sigma0",
             "Tie points",
             "Residuals",
@@ -766,7 +779,8 @@ mod tests {
         }
         write_html(&path, &report).unwrap();
         let page = std::fs::read_to_string(&path).unwrap();
-        assert_eq!(page.matches("<svg").count(), 10);
+        // The 8 plots above and 4 more: GNSS availability, position error, residuals, speed.
+        assert_eq!(page.matches("<svg").count(), 12);
         for title in [
             "GNSS availability",
             "Position error",
