@@ -112,7 +112,8 @@ pub fn smooth_over_fixes(
     if fixes == 0 || epochs.len() < 2 {
         return None;
     }
-    let chains: Vec<Chain> = (0..3).map(|c| chain(epochs, lever_arm_m, c)).collect();
+    let fixed = fixed_centres(epochs, lever_arm_m);
+    let chains: Vec<Chain> = (0..3).map(|c| chain(epochs, &fixed, c)).collect();
     let q = estimate_step_variance(&chains);
     let solved: Vec<Smoothed> = chains.iter().map(|ch| smooth(ch, q)).collect();
     let (rms_shift_m, largest_shift_m) = apply(epochs, &solved, lever_arm_m, right_of);
@@ -179,8 +180,25 @@ fn apply(
     ((sum_sq / epochs.len() as f64).sqrt(), largest)
 }
 
-/// Coordinate `c`'s chain of `epochs`.
-fn chain(epochs: &[EpochRecord], lever_arm_m: [f64; 3], c: usize) -> Chain {
+/// Each fix as an observation of its epoch's centre, with its variance per coordinate.
+/// The fix observes the antenna: the centre is the fix less the lever arm turned by the
+/// epoch's attitude (its error is the attitude's times the arm).
+fn fixed_centres(epochs: &[EpochRecord], lever_arm_m: [f64; 3]) -> Vec<Option<([f64; 3], f64)>> {
+    epochs
+        .iter()
+        .map(|e| {
+            e.gnss.map(|g| {
+                let pose = e.left.to_pose();
+                let antenna = aiding::antenna_position(&pose, lever_arm_m);
+                let centre = [0, 1, 2].map(|c| g.position[c] - (antenna[c] - pose.centre[c]));
+                (centre, g.sigma_m * g.sigma_m)
+            })
+        })
+        .collect()
+}
+
+/// Coordinate `c`'s chain of `epochs`, with the centres the fixes observe.
+fn chain(epochs: &[EpochRecord], fixed: &[Option<([f64; 3], f64)>], c: usize) -> Chain {
     let centre = |e: &EpochRecord| [e.left.x, e.left.y, e.left.z][c];
     let variance = |e: &EpochRecord| e.left.sigma.map(|s| s[3 + c] * s[3 + c]);
     let steps = epochs
@@ -201,18 +219,7 @@ fn chain(epochs: &[EpochRecord], lever_arm_m: [f64; 3], c: usize) -> Chain {
             }
         })
         .collect();
-    let fixes = epochs
-        .iter()
-        .map(|e| {
-            e.gnss.map(|g| {
-                // The fix observes the antenna: the centre is the fix less the lever arm
-                // turned by the epoch's attitude (its error is the attitude's times the arm).
-                let pose = e.left.to_pose();
-                let offset = aiding::antenna_position(&pose, lever_arm_m)[c] - pose.centre[c];
-                (g.position[c] - offset, g.sigma_m * g.sigma_m)
-            })
-        })
-        .collect();
+    let fixes = fixed.iter().map(|f| f.map(|(x, r)| (x[c], r))).collect();
     Chain { steps, fixes }
 }
 

@@ -2,6 +2,8 @@
 //! outputs (points.ply, E-Foto files, residual histogram) and its behaviour on
 //! bad input (missing dataset, wrong calibration, a corrupt image, a firmware
 //! that dies mid-run).
+mod common;
+use common::read_ply;
 use phototraverse_core::camera::{project_to_pixel, Pose};
 use phototraverse_host::dataset::Dataset;
 use std::path::{Path, PathBuf};
@@ -87,25 +89,6 @@ fn lines(path: &Path) -> usize {
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
         .lines()
         .count()
-}
-
-/// Vertices of points.ply: x y z sx sy sz id observations.
-fn read_ply(path: &Path) -> Vec<Vec<String>> {
-    let t = std::fs::read_to_string(path).unwrap();
-    let (header, body) = t.split_once("end_header\n").unwrap();
-    let n: usize = header
-        .lines()
-        .find_map(|l| l.strip_prefix("element vertex "))
-        .unwrap()
-        .parse()
-        .unwrap();
-    let rows: Vec<Vec<String>> = body
-        .lines()
-        .map(|l| l.split(' ').map(String::from).collect())
-        .collect();
-    assert_eq!(rows.len(), n, "vertex count of {}", path.display());
-    assert!(rows.iter().all(|r| r.len() == 8));
-    rows
 }
 
 /// Left and right poses per epoch from eop.csv.

@@ -25,6 +25,9 @@ use std::path::Path;
 /// COLMAP's (its corner = 0).
 const PIXEL_ORIGIN: f64 = 0.5;
 
+/// COLMAP's world-to-camera rotation and translation: `x_cam = R X + t`.
+type WorldToCamera = (Matrix3<f64>, Vector3<f64>);
+
 /// COLMAP camera ids of the left and right cameras.
 const CAMERA_IDS: [u32; 2] = [1, 2];
 
@@ -107,7 +110,7 @@ pub fn corrected_pixel(interior: &Interior, col: f64, row: f64) -> [f64; 2] {
 }
 
 /// COLMAP's world-to-camera rotation and translation of a photogrammetric pose.
-pub fn world_to_camera(pose: &Pose) -> (Matrix3<f64>, Vector3<f64>) {
+pub fn world_to_camera(pose: &Pose) -> WorldToCamera {
     let flip = Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, -1.0));
     let r = flip * pose.rotation();
     let t = -(r * Vector3::from(pose.centre));
@@ -125,7 +128,12 @@ pub fn write_colmap(
 ) -> Result<ColmapSummary> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let interiors = [rig.left, rig.right];
-    let by_id: BTreeMap<u32, &ModelImage> = images.iter().map(|i| (i.id, i)).collect();
+    let pinholes = interiors.map(|i| Pinhole::of(&i));
+    // Each image's camera and world-to-camera transform, by id.
+    let by_id: BTreeMap<u32, (usize, WorldToCamera)> = images
+        .iter()
+        .map(|i| (i.id, (i.camera as usize, world_to_camera(&i.pose))))
+        .collect();
     // Each image's points (x, y, point id) in order; each point's track (image, index).
     let mut image_points: BTreeMap<u32, Vec<([f64; 2], u32)>> = BTreeMap::new();
     let mut tracks: Vec<Track> = Vec::new();
@@ -134,13 +142,11 @@ pub fn write_colmap(
         let (mut track, mut err_sum) = (Vec::new(), 0.0);
         for m in &p.measurements {
             let id = image_id(m.epoch, m.camera);
-            let Some(image) = by_id.get(&id) else {
+            let Some(&(camera, (r, t))) = by_id.get(&id) else {
                 continue;
             };
-            let interior = &interiors[image.camera as usize];
-            let xy = corrected_pixel(interior, m.col, m.row);
-            let (r, t) = world_to_camera(&image.pose);
-            let Some(uv) = Pinhole::of(interior).project(&(r * Vector3::from(p.xyz) + t)) else {
+            let xy = corrected_pixel(&interiors[camera], m.col, m.row);
+            let Some(uv) = pinholes[camera].project(&(r * Vector3::from(p.xyz) + t)) else {
                 continue;
             };
             let e2 = (uv[0] - xy[0]).powi(2) + (uv[1] - xy[1]).powi(2);
@@ -159,7 +165,7 @@ pub fn write_colmap(
             });
         }
     }
-    write_cameras(&dir.join("cameras.txt"), &interiors)?;
+    write_cameras(&dir.join("cameras.txt"), &interiors, &pinholes)?;
     write_images(&dir.join("images.txt"), images, &image_points)?;
     write_points(&dir.join("points3D.txt"), &tracks)?;
     Ok(ColmapSummary {
@@ -180,13 +186,12 @@ fn create(path: &Path) -> Result<std::io::BufWriter<std::fs::File>> {
     Ok(std::io::BufWriter::new(f))
 }
 
-fn write_cameras(path: &Path, interiors: &[Interior; 2]) -> Result<()> {
+fn write_cameras(path: &Path, interiors: &[Interior; 2], pinholes: &[Pinhole; 2]) -> Result<()> {
     let mut w = create(path)?;
     writeln!(w, "# Camera list with one line of data per camera:")?;
     writeln!(w, "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]")?;
     writeln!(w, "# Number of cameras: 2 (the rig's left and right)")?;
-    for (id, interior) in CAMERA_IDS.iter().zip(interiors) {
-        let p = Pinhole::of(interior);
+    for ((id, interior), p) in CAMERA_IDS.iter().zip(interiors).zip(pinholes) {
         writeln!(
             w,
             "{id} PINHOLE {} {} {:.9} {:.9} {:.9} {:.9}",

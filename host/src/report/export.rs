@@ -171,26 +171,19 @@ mod tests {
         let pose = Pose::from_degrees(90.0, 0.5, -1.0, [0.1, 2.0, 1.5]);
         let eop = CameraEop::from_pose(&pose, Some([1e-4, 2e-4, 3e-4, 0.01, 0.02, 0.03]));
         let rec = EpochRecord {
-            epoch: 3,
-            time: None,
-            status: EpochStatus::Flagged,
             note: Some("chi-square".into()),
-            left: eop,
-            right: CameraEop { sigma: None, ..eop },
             sigma0: Some(1.05),
             chi2_passed: Some(false),
-            chi2: None,
             observations: 400,
             tie_points: 100,
             keypoints: [1000, 990],
             stereo_matches: 500,
-            stage_ms: Default::default(),
-            gnss: None,
-            odometer_count_m: None,
-            velocity: None,
-            relative_sd_m: None,
-            step_m: None,
-            realtime_centre_m: None,
+            ..EpochRecord::posed(
+                3,
+                None,
+                EpochStatus::Flagged,
+                (eop, CameraEop { sigma: None, ..eop }),
+            )
         };
         let report = RunReport {
             epochs: vec![rec],

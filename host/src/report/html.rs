@@ -702,26 +702,14 @@ mod tests {
                 None,
             );
             report.epochs.push(EpochRecord {
-                epoch: k,
-                time: None,
-                status: EpochStatus::Ok,
-                note: None,
-                left: eop,
-                right: eop,
                 sigma0: Some(1.0),
                 chi2_passed: Some(true),
-                chi2: None,
                 observations: 100,
                 tie_points: 25,
                 keypoints: [1000, 990],
                 stereo_matches: 500,
                 stage_ms: [("features".to_string(), 10.0), ("adjust".to_string(), 2.0)].into(),
-                gnss: None,
-                odometer_count_m: None,
-                velocity: None,
-                relative_sd_m: None,
-                step_m: None,
-                realtime_centre_m: None,
+                ..EpochRecord::posed(k, None, EpochStatus::Ok, (eop, eop))
             });
         }
         report.ground_truth = Some((0..5).map(|k| [0.0, k as f64, 0.0]).collect());

@@ -106,18 +106,8 @@ impl<'a> Window<'a> {
         slot.time = time_s;
         slot.id = id;
         if self.n_epochs == 0 {
-            let s = &self.cfg.sigmas;
-            let mut info = [0.0; 36];
-            for i in 0..6 {
-                let sig = if i < 3 {
-                    s.datum_angle_rad
-                } else {
-                    s.datum_position_m
-                };
-                info[i * 6 + i] = 1.0 / (sig * sig);
-            }
             slot.prior = local;
-            slot.prior_info = info;
+            slot.prior_info = self.cfg.sigmas.datum_information();
             slot.flags |= EP_PRIOR;
         }
         self.epochs[self.n_epochs] = slot;

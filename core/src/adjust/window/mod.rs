@@ -62,6 +62,23 @@ pub struct ConstraintSigmas {
     pub velocity_change_mps: f64,
 }
 
+impl ConstraintSigmas {
+    /// The information (6x6, row-major) of the datum's pose prior: the first epoch's,
+    /// and any first epoch's that has no carried covariance.
+    fn datum_information(&self) -> [f64; 36] {
+        let mut info = [0.0; 36];
+        for i in 0..6 {
+            let sig = if i < 3 {
+                self.datum_angle_rad
+            } else {
+                self.datum_position_m
+            };
+            info[i * 6 + i] = 1.0 / (sig * sig);
+        }
+        info
+    }
+}
+
 impl Default for ConstraintSigmas {
     fn default() -> Self {
         ConstraintSigmas {

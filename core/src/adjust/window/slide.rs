@@ -100,15 +100,7 @@ impl<'a> Window<'a> {
             }
         };
         if !have {
-            let s = self.cfg.sigmas;
-            for i in 0..6 {
-                let sig = if i < 3 {
-                    s.datum_angle_rad
-                } else {
-                    s.datum_position_m
-                };
-                info[i * 6 + i] = 1.0 / (sig * sig);
-            }
+            info = self.cfg.sigmas.datum_information();
         }
         next.prior = next.params;
         next.prior_info = info;
