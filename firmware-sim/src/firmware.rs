@@ -11,7 +11,7 @@ use phototraverse_core::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget
 use phototraverse_core::protocol::assembly::{AssemblyError, FrameAssembler};
 use phototraverse_core::protocol::messages::{
     points_flags, stage, Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult,
-    EpochStatus, ErrorCode, Message, Points, SettingError, Stats,
+    EpochStatus, ErrorCode, Message, Points, SettingError, StackUse, Stats,
 };
 use phototraverse_core::protocol::{MAX_PAYLOAD, PROTOCOL_VERSION};
 
@@ -84,6 +84,11 @@ pub fn configuration_budget<F: ProcessorFactory>(
 /// The firmware: its working storage, processor factory, clock and limits.
 pub struct Firmware<'w, F, C> {
     work: &'w mut [u8],
+    /// Separate storage for the two frame buffers (a part whose RAM is in blocks);
+    /// without it the frames are carved from `work` too.
+    frames: Option<&'w mut [u8]>,
+    /// Reads the stack's high-water mark, on a target that paints its stack.
+    stack_gauge: Option<fn() -> StackUse>,
     factory: F,
     clock: C,
     limits: Limits,
@@ -93,10 +98,29 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
     pub fn new(work: &'w mut [u8], factory: F, clock: C, limits: Limits) -> Self {
         Firmware {
             work,
+            frames: None,
+            stack_gauge: None,
             factory,
             clock,
             limits,
         }
+    }
+
+    /// Carves the two frame buffers from `frames` instead of the working storage.
+    pub fn with_frame_storage(mut self, frames: &'w mut [u8]) -> Self {
+        self.frames = Some(frames);
+        self
+    }
+
+    /// Reports the stack's high-water mark in every Stats, as `gauge` reads it.
+    pub fn with_stack_gauge(mut self, gauge: fn() -> StackUse) -> Self {
+        self.stack_gauge = Some(gauge);
+        self
+    }
+
+    /// Bytes of working storage, frame storage included.
+    fn storage_bytes(&self) -> usize {
+        self.work.len() + self.frames.as_ref().map_or(0, |f| f.len())
     }
 
     pub fn capabilities(&self) -> Capabilities {
@@ -110,7 +134,7 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
             pixel_formats: 0b11,
             processor: F::KIND,
             max_keypoints: self.limits.max_keypoints,
-            work_bytes: self.work.len().min(u32::MAX as usize) as u32,
+            work_bytes: self.storage_bytes().min(u32::MAX as usize) as u32,
             link_bytes: LinkBuffers::BYTES as u32,
             held_payload: RX_HELD_PAYLOAD as u16,
         }
@@ -212,33 +236,32 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
                 return Ok(Next::Idle);
             }
         };
-        let capacity = self.work.len();
-        if budget.total() > capacity {
+        let capacity = self.storage_bytes();
+        if let Some(text) = self.shortfall(&budget) {
             link.tx(&self.clock).error(
                 port,
                 ErrorCode::ConfigTooLarge,
                 u32::MAX,
                 u16::MAX,
-                format_args!(
-                    "configuration needs {} bytes ({} for frames) but the firmware has {}",
-                    budget.total(),
-                    budget.total_of(ComponentKind::Frame),
-                    capacity
-                ),
+                format_args!("{text}"),
             )?;
             return Ok(Next::Idle);
         }
         let caps = self.capabilities();
         let Firmware {
             work,
+            frames,
+            stack_gauge,
             factory,
             clock,
             ..
         } = self;
         let mut arena = Arena::new(work);
+        let mut frame_arena = frames.as_deref_mut().map(Arena::new);
         let built = (|| {
-            let left = arena.alloc_slice::<u8>(frame)?;
-            let right = arena.alloc_slice::<u8>(frame)?;
+            let frame_from = frame_arena.as_mut().unwrap_or(&mut arena);
+            let left = frame_from.alloc_slice::<u8>(frame)?;
+            let right = frame_from.alloc_slice::<u8>(frame)?;
             let processor = factory.build(config, &mut arena)?;
             Ok::<_, BuildError>((left, right, processor))
         })();
@@ -259,7 +282,7 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
                 return Ok(Next::Idle);
             }
         };
-        let used = arena.used();
+        let used = arena.used() + frame_arena.as_ref().map_or(0, Arena::used);
         let accepted = ConfigAccepted {
             predicted_bytes: budget.total() as u32,
             frame_bytes: 2 * frame as u32,
@@ -284,6 +307,7 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
             predicted: budget.total() as u32,
             high_water: used as u32,
             capacity: capacity as u32,
+            stack_gauge: *stack_gauge,
             last_epoch: u32::MAX,
             points_index: 0,
         };
@@ -294,6 +318,28 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
             Served::Exit(n) => n,
             Served::Eof => Next::Eof,
         })
+    }
+
+    /// Why the storage cannot hold what `budget` predicts, if it cannot.
+    fn shortfall(&self, budget: &MemoryBudget) -> Option<Shortfall> {
+        let frames = budget.total_of(ComponentKind::Frame);
+        let total = budget.total();
+        match &self.frames {
+            None if total > self.work.len() => Some(Shortfall::Total {
+                needed: total,
+                frames,
+                capacity: self.work.len(),
+            }),
+            Some(store) if frames > store.len() => Some(Shortfall::Frames {
+                needed: frames,
+                capacity: store.len(),
+            }),
+            Some(_) if total - frames > self.work.len() => Some(Shortfall::Arena {
+                needed: total - frames,
+                capacity: self.work.len(),
+            }),
+            _ => None,
+        }
     }
 
     /// The settings' own limits (the same the host checks), then this firmware's.
@@ -314,6 +360,46 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
             return Err(Refusal::Rig);
         }
         Ok(())
+    }
+}
+
+/// Which storage a configuration overflows, and by how much.
+enum Shortfall {
+    Total {
+        needed: usize,
+        frames: usize,
+        capacity: usize,
+    },
+    Frames {
+        needed: usize,
+        capacity: usize,
+    },
+    Arena {
+        needed: usize,
+        capacity: usize,
+    },
+}
+
+impl core::fmt::Display for Shortfall {
+    fn fmt(&self, f: &mut core::fmt::Formatter) -> core::fmt::Result {
+        match *self {
+            Shortfall::Total {
+                needed,
+                frames,
+                capacity,
+            } => write!(
+                f,
+                "configuration needs {needed} bytes ({frames} for frames) but the firmware has {capacity}"
+            ),
+            Shortfall::Frames { needed, capacity } => write!(
+                f,
+                "the two frame buffers need {needed} bytes but the firmware's frame storage has {capacity}"
+            ),
+            Shortfall::Arena { needed, capacity } => write!(
+                f,
+                "configuration needs {needed} bytes besides the frames but the firmware's arena has {capacity}"
+            ),
+        }
     }
 }
 
@@ -376,6 +462,7 @@ struct Epochs<'a, 'c, Pr> {
     predicted: u32,
     high_water: u32,
     capacity: u32,
+    stack_gauge: Option<fn() -> StackUse>,
     /// Epoch of the last result (named in tie point reports).
     last_epoch: u32,
     /// Index of the next Points message of the current report.
@@ -588,6 +675,8 @@ impl<Pr: EpochProcessor> Epochs<'_, '_, Pr> {
             epochs_ok: self.ok,
             epochs_lost: self.lost_count,
             link: tx.counters(),
+            capacities: self.processor.capacities(),
+            stack: self.stack_gauge.map(|gauge| gauge()),
         };
         tx.send(port, &Message::Stats(stats))
     }

@@ -5,8 +5,8 @@ use phototraverse_core::budget::{Arena, ComponentKind, MemoryBudget, OutOfMemory
 use phototraverse_core::features::FeatureSet;
 use phototraverse_core::image::ImageView;
 use phototraverse_core::protocol::messages::{
-    self, processor_kind, stage, Aux, Configure, EpochResult, EpochStatus, Figures, Points,
-    SiftCounts,
+    self, capacity, processor_kind, stage, Aux, CapacityUse, Configure, EpochResult, EpochStatus,
+    Figures, Points, SiftCounts,
 };
 use phototraverse_core::sift::{Sift, SiftConfig, SiftError};
 
@@ -47,6 +47,11 @@ pub trait EpochProcessor {
     /// without tie points report none.
     fn points(&mut self, _flush: bool, _max_payload: usize, _msg: &mut Points) -> bool {
         false
+    }
+
+    /// The highest use of each [`capacity`] so far; zeros for what the processor lacks.
+    fn capacities(&self) -> [CapacityUse; capacity::COUNT] {
+        [CapacityUse::default(); capacity::COUNT]
     }
 }
 

@@ -12,9 +12,9 @@ use phototraverse_core::budget::{Arena, MemoryBudget};
 use phototraverse_core::camera::Pose;
 use phototraverse_core::matching::StereoGeometry;
 use phototraverse_core::protocol::messages::{
-    processor_kind, stage, AdjustMode, Adjustment, Configure, Counts, EpochResult, EpochStatus,
-    Figures, PointObservation, PointRecord, Points, ResultFlags, RigEstimate, AUX_GNSS,
-    AUX_ODOMETER,
+    capacity, processor_kind, stage, AdjustMode, Adjustment, CapacityUse, Configure, Counts,
+    EpochResult, EpochStatus, Figures, PointObservation, PointRecord, Points, ResultFlags,
+    RigEstimate, AUX_GNSS, AUX_ODOMETER,
 };
 use phototraverse_core::sift::SiftError;
 use phototraverse_core::traverse::{
@@ -35,6 +35,8 @@ pub struct TraverseFactory;
 pub struct TraverseProcessor<'a> {
     traverse: Traverse<'a>,
     report: ReportCursor,
+    /// The highest use of each reported capacity so far.
+    peaks: [CapacityUse; capacity::COUNT],
 }
 
 /// Where the tie point report stands.
@@ -221,6 +223,7 @@ impl ProcessorFactory for TraverseFactory {
         Ok(TraverseProcessor {
             traverse,
             report: ReportCursor::default(),
+            peaks: [CapacityUse::default(); capacity::COUNT],
         })
     }
 }
@@ -249,7 +252,36 @@ fn aux_of(input: &EpochInput) -> AuxObservations {
     }
 }
 
+impl TraverseProcessor<'_> {
+    /// Raises the capacity peaks to this epoch's use.
+    fn record_peaks(&mut self, out: &traverse::EpochOutput) {
+        let cfg = self.traverse.config();
+        let report = self.traverse.match_report();
+        let (patches, patch_capacity) = self.traverse.patches_in_use().unwrap_or((0, 0));
+        let uses = [
+            (
+                out.keypoints[0].max(out.keypoints[1]) as usize,
+                cfg.sift.max_keypoints,
+            ),
+            (out.stereo_matches as usize, cfg.matching.max_keypoints),
+            (report.tracks.live as usize, cfg.matching.max_tracks),
+            (out.tie_points as usize, cfg.matching.max_tie_points),
+            (out.points as usize, cfg.adjust.max_points),
+            (out.observations as usize, cfg.adjust.max_observations),
+            (patches, patch_capacity),
+        ];
+        for (peak, (used, reserved)) in self.peaks.iter_mut().zip(uses) {
+            peak.record(used);
+            peak.reserved = reserved.min(u32::MAX as usize) as u32;
+        }
+    }
+}
+
 impl EpochProcessor for TraverseProcessor<'_> {
+    fn capacities(&self) -> [CapacityUse; capacity::COUNT] {
+        self.peaks
+    }
+
     fn frame_size(&self, camera: usize) -> Option<(u16, u16)> {
         let rig = &self.traverse.config().rig;
         let c = if camera == 0 { &rig.left } else { &rig.right };
@@ -279,6 +311,7 @@ impl EpochProcessor for TraverseProcessor<'_> {
             aux_of(input),
             &ClockRef(clock),
         );
+        self.record_peaks(&out);
         let mut result = epoch_result(input.epoch, &out);
         // The rig as the adjustment has it, when it can differ from the calibration:
         // estimated freely, or corrected by the calibration check.

@@ -6,6 +6,7 @@ pub mod dataset;
 pub mod eval;
 pub mod interrupt;
 pub mod link;
+pub mod mcu;
 pub mod pipeline;
 pub mod poses;
 pub mod report;

@@ -149,6 +149,13 @@ impl PipelineSettings {
         Ok(s)
     }
 
+    /// The small profile for a 320x240 rig on a microcontroller
+    /// (`configs/embedded-320x240.toml`, built in).
+    pub fn embedded() -> Self {
+        toml::from_str(include_str!("../../configs/embedded-320x240.toml"))
+            .expect("configs/embedded-320x240.toml is valid (tested)")
+    }
+
     /// Reads `path` when given, else the defaults.
     pub fn load(path: Option<&Path>) -> Result<Self> {
         path.map_or_else(|| Ok(Self::default()), Self::from_file)
@@ -226,6 +233,15 @@ impl PipelineSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_built_in_embedded_profile_is_the_file() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/embedded-320x240.toml");
+        let file = PipelineSettings::from_file(&path).unwrap();
+        let built_in = PipelineSettings::embedded();
+        built_in.validate().unwrap();
+        assert_eq!(format!("{built_in:?}"), format!("{file:?}"));
+    }
 
     #[test]
     fn reads_partial_files_and_names_bad_keys() {

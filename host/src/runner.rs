@@ -11,13 +11,14 @@
 use crate::dataset::{aiding, Dataset};
 use crate::eval::{evaluate, Evaluation};
 use crate::link::LinkOptions;
+use crate::mcu::{Part, StorageSizes, TargetReport};
 use crate::pipeline::PipelineSettings;
 use crate::poses::{format_pose, KittiPose};
 use crate::report::colmap;
 use crate::report::{
     efoto_image_index, velocities, write_efoto, write_eop_csv, write_html, write_ply, CameraEop,
-    EpochChi2, EpochRecord, EpochStatus, GnssRecord, MemoryLine, QualitySummary, RigReport,
-    RunReport, TieCollector,
+    CapacityLine, EpochChi2, EpochRecord, EpochStatus, GnssRecord, MemoryLine, QualitySummary,
+    RigReport, RunReport, TieCollector,
 };
 use crate::session::{EpochFrames, Session, SessionOptions};
 use crate::smoothing;
@@ -31,7 +32,7 @@ use phototraverse_core::protocol::messages::{
 use phototraverse_core::traverse::motion::constant_velocity;
 use phototraverse_firmware_sim::{configuration_budget, TraverseFactory};
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// How to run.
 #[derive(Debug, Clone)]
@@ -65,14 +66,16 @@ pub fn run_dataset(ds: &Dataset, out: &Path, opts: &RunOptions) -> Result<RunOut
     let configure = opts
         .settings
         .configure_for(&ds.rig, &ds.datum, &ds.precision);
+    let image = opts.link.target_image(&configure)?;
     let transport = opts
         .link
-        .open()
+        .open_with_image(image.clone())
         .context("cannot open the link to the firmware")?;
     let mut session = Session::open(transport, SessionOptions::from_link(&opts.link))
         .context("the firmware did not answer the hello")?;
     let accepted = session.configure(&configure)?;
     let mut run = Run::new(ds, out, opts, accepted)?;
+    run.target_image = image;
     let n = opts.max_epochs.map_or(ds.len(), |m| m.min(ds.len()));
     let bar = progress_bar(n as u64, opts.progress);
     let mut failure = None;
@@ -151,6 +154,8 @@ struct Run<'d> {
     chi2: Vec<ChiSquareTest>,
     /// Tie points and observations reported by the firmware.
     ties: TieCollector,
+    /// The part and image of a run on an emulated microcontroller.
+    target_image: Option<(Part, PathBuf)>,
 }
 
 impl<'d> Run<'d> {
@@ -184,6 +189,7 @@ impl<'d> Run<'d> {
             rig: ds.rig,
             chi2: Vec::new(),
             ties: TieCollector::default(),
+            target_image: None,
         })
     }
 
@@ -493,10 +499,21 @@ impl<'d> Run<'d> {
 
     fn finish<T: crate::link::Transport>(mut self, session: &Session<T>) -> Result<RunOutcome> {
         let last = self.report.epochs.len().checked_sub(1);
-        let high_water = last
-            .and_then(|l| session.stats(l as u32))
-            .map(|s| s.memory_high_water);
-        self.report.memory = self.memory_lines(high_water);
+        let last_stats = last.and_then(|l| session.stats(l as u32));
+        self.report.memory = self.memory_lines(last_stats.map(|s| s.memory_high_water));
+        self.report.capacities = last_stats.map(capacity_lines).unwrap_or_default();
+        if let Some((part, image)) = &self.target_image {
+            let configure =
+                self.settings
+                    .configure_for(&self.ds.rig, &self.ds.datum, &self.ds.precision);
+            let stats: Vec<_> = session.all_stats().copied().collect();
+            self.report.target = Some(TargetReport::new(
+                part,
+                image,
+                StorageSizes::for_configuration(&configure)?,
+                &stats,
+            )?);
+        }
         self.smooth()?;
         for (e, v) in velocities(&self.report.epochs).into_iter().enumerate() {
             self.report.epochs[e].velocity = v;
@@ -565,6 +582,21 @@ fn note_aux(rec: &mut EpochRecord, aux: Option<Aux>) {
     if a.flags & AUX_ODOMETER != 0 {
         rec.odometer_count_m = Some(a.odometer_m);
     }
+}
+
+/// The firmware's capacity peaks, by name; a processor without a capacity reports none.
+fn capacity_lines(stats: &messages::Stats) -> Vec<CapacityLine> {
+    stats
+        .capacities
+        .iter()
+        .zip(messages::capacity::NAMES)
+        .filter(|(c, _)| c.reserved > 0)
+        .map(|(c, name)| CapacityLine {
+            name: name.into(),
+            peak: c.peak,
+            reserved: c.reserved,
+        })
+        .collect()
 }
 
 fn median(v: &mut [f64]) -> f64 {

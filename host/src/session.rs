@@ -610,6 +610,11 @@ impl<T: Transport> Session<T> {
         self.stats.get(&epoch)
     }
 
+    /// The firmware's statistics of every epoch, in epoch order.
+    pub fn all_stats(&self) -> impl Iterator<Item = &Stats> {
+        self.stats.values()
+    }
+
     pub fn errors(&self) -> &[FirmwareError] {
         &self.errors
     }

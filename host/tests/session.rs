@@ -367,6 +367,58 @@ fn serial_session_over_a_pseudo_terminal() {
     sift_session(t, 2);
 }
 
+/// A firmware as on a part whose RAM is in blocks: the frames in their own storage,
+/// checked on their own, and a stack gauge whose figures reach the host.
+#[test]
+fn frames_in_their_own_storage_and_the_stack_reach_the_host() {
+    use phototraverse_core::protocol::messages::StackUse;
+    use phototraverse_firmware_sim::{Firmware, LinkBuffers, NoClock, SiftFactory};
+    let frame = W as usize * H as usize;
+    // Frame storage for two frames of W x H: a configuration twice as wide is refused
+    // naming the frame storage.
+    let pty = Pty::open().unwrap();
+    let master = pty.master.try_clone().unwrap();
+    std::thread::spawn(move || {
+        let mut work = vec![0u8; 1 << 20];
+        let mut frames = vec![0u8; 2 * frame];
+        let mut buffers = Box::new(LinkBuffers::new());
+        let mut fw = Firmware::new(&mut work, SiftFactory, NoClock, Default::default())
+            .with_frame_storage(&mut frames)
+            .with_stack_gauge(|| StackUse {
+                used: 4242,
+                reserved: 65536,
+            });
+        let _ = fw.run(&mut FilePort(master), &mut buffers);
+    });
+    let t = SerialLink::open(pty.slave_path.to_str().unwrap(), 921_600).unwrap();
+    let mut s = Session::open(t, SessionOptions::default()).expect("hello");
+    let err = s.configure(&config(2 * W, H)).unwrap_err().to_string();
+    assert!(
+        err.contains("ConfigTooLarge")
+            && err.contains(&format!(
+                "the two frame buffers need {} bytes but the firmware's frame storage has {}",
+                4 * frame,
+                2 * frame
+            )),
+        "{err}"
+    );
+    let acc = s.configure(&config(W, H)).expect("configuration accepted");
+    assert_eq!(acc.frame_bytes, 2 * frame as u32);
+    send_epochs(&mut s, 0..2, W, H);
+    s.finish().expect("all results");
+    check_results(&s, 0..2, W, H);
+    let stats = s.stats(1).expect("stats of epoch 1");
+    assert_eq!(
+        stats.stack,
+        Some(StackUse {
+            used: 4242,
+            reserved: 65536
+        })
+    );
+    // The feature processor reserves none of the traverse's capacities.
+    assert!(stats.capacities.iter().all(|c| c.reserved == 0));
+}
+
 fn raw_packet(version: u8) -> Vec<u8> {
     let mut raw = [0u8; MAX_PACKET];
     let mut wire = vec![0u8; 64];

@@ -1382,7 +1382,62 @@ pub struct Stats {
     pub epochs_lost: u32,
     /// The firmware's receive side and its retransmissions.
     pub link: LinkCounters,
+    /// Each [`capacity`]'s highest use so far against what is reserved (zero for a
+    /// processor without it).
+    pub capacities: [CapacityUse; capacity::COUNT],
+    /// The stack's high-water mark, on a target that paints its stack.
+    pub stack: Option<StackUse>,
 }
+
+/// The capacities whose peak use the firmware reports, in [`Stats::capacities`].
+pub mod capacity {
+    /// Keypoints of one image (the larger of left and right).
+    pub const KEYPOINTS: usize = 0;
+    /// Left-right matches of an epoch.
+    pub const STEREO_MATCHES: usize = 1;
+    /// Live tracks.
+    pub const TRACKS: usize = 2;
+    /// Tie points linking an epoch to the previous one.
+    pub const TIE_POINTS: usize = 3;
+    /// Tie points in the adjustment window.
+    pub const WINDOW_POINTS: usize = 4;
+    /// Image observations in the adjustment window.
+    pub const WINDOW_OBSERVATIONS: usize = 5;
+    /// Image patches kept for area tracking.
+    pub const PATCHES: usize = 6;
+    pub const COUNT: usize = 7;
+    pub const NAMES: [&str; COUNT] = [
+        "keypoints_per_image",
+        "stereo_matches",
+        "tracks",
+        "tie_points",
+        "window_points",
+        "window_observations",
+        "patches",
+    ];
+}
+
+/// The highest use of a capacity against the items reserved for it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct CapacityUse {
+    pub peak: u32,
+    pub reserved: u32,
+}
+
+impl CapacityUse {
+    /// Raises the peak to `used` if higher.
+    pub fn record(&mut self, used: usize) {
+        self.peak = self.peak.max(used.min(u32::MAX as usize) as u32);
+    }
+}
+
+/// The stack's high-water mark, bytes, against the bytes reserved for it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StackUse {
+    pub used: u32,
+    pub reserved: u32,
+}
+
 repr!(
     Stats,
     Stats,
@@ -1396,6 +1451,24 @@ repr!(
             epochs_ok: r.u32()?,
             epochs_lost: r.u32()?,
             link: LinkCounters::parse(&mut r)?,
+            capacities: {
+                let mut c = [CapacityUse::default(); capacity::COUNT];
+                for u in c.iter_mut() {
+                    *u = CapacityUse {
+                        peak: r.u32()?,
+                        reserved: r.u32()?,
+                    };
+                }
+                c
+            },
+            stack: match r.u8()? {
+                0 => None,
+                1 => Some(StackUse {
+                    used: r.u32()?,
+                    reserved: r.u32()?,
+                }),
+                _ => return Err(ParseError::Invalid("stats stack presence")),
+            },
         })
     },
     |s, w| {
@@ -1409,6 +1482,16 @@ repr!(
             s.epochs_lost,
         ])?;
         s.link.emit(&mut w)?;
+        for c in &s.capacities {
+            w.u32s(&[c.peak, c.reserved])?;
+        }
+        match s.stack {
+            None => w.u8(0)?,
+            Some(st) => {
+                w.u8(1)?;
+                w.u32s(&[st.used, st.reserved])?;
+            }
+        }
     }
 );
 

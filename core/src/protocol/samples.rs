@@ -87,6 +87,14 @@ pub fn sample_messages(chunk: &[u8]) -> [Message<'_>; 16] {
                 retransmissions: 2,
                 ..Default::default()
             },
+            capacities: [CapacityUse {
+                peak: 90,
+                reserved: 120,
+            }; capacity::COUNT],
+            stack: Some(StackUse {
+                used: 21_000,
+                reserved: 4_177_000,
+            }),
         }),
         Message::Error(ErrorMsg {
             code: ErrorCode::ChunkOutOfOrder,

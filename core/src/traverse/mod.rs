@@ -265,6 +265,12 @@ impl<'a> Traverse<'a> {
         self.last_solve_error
     }
 
+    /// Image patches kept for area tracking and the store's capacity; `None` when
+    /// area tracking is off.
+    pub fn patches_in_use(&self) -> Option<(usize, usize)> {
+        self.patches.as_ref().map(|p| (p.len(), p.capacity()))
+    }
+
     pub fn config(&self) -> &TraverseConfig {
         &self.cfg
     }

@@ -173,6 +173,11 @@ impl<'a> Patches<'a> {
         self.n
     }
 
+    /// Templates the store holds at most.
+    pub fn capacity(&self) -> usize {
+        self.keys.len()
+    }
+
     pub fn is_empty(&self) -> bool {
         self.n == 0
     }

@@ -1,5 +1,10 @@
 //! `phototraverse budget`: the firmware's memory for a configuration and image size.
+use crate::mcu::{
+    build_image, elf_sections, section_bytes, stack_reserved, Part, Section, StorageSizes,
+    TargetReport,
+};
 use crate::pipeline::PipelineSettings;
+use crate::report::{CapacityLine, RunReport};
 use anyhow::{Context, Result};
 use phototraverse_core::budget::{ComponentKind, MemoryBudget};
 use phototraverse_core::camera::{Interior, Rig};
@@ -26,6 +31,18 @@ pub struct Args {
     /// frames may live in other memory: whether they fit too is printed).
     #[arg(long)]
     pub ram: Option<String>,
+    /// Link the firmware image for this microcontroller (mps2-an500, stm32h743) with its
+    /// storage sized from the configuration, and show the image's sections beside the
+    /// prediction. The command exits with status 1 when the link fails: the
+    /// configuration does not fit the part's memory map (the linker names the region
+    /// and the overflow). Needs the Rust target thumbv7em-none-eabihf.
+    #[arg(long)]
+    pub part: Option<String>,
+    /// A run's report.json: show what the run measured (the capacities' peaks and, for
+    /// a run on the emulated microcontroller, its sections and stack) beside the
+    /// prediction.
+    #[arg(long)]
+    pub measured: Option<PathBuf>,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -72,14 +89,18 @@ fn parse_bytes(s: &str) -> Result<usize> {
     Ok(n * mult)
 }
 
+/// A rig of the image size (the budget depends on nothing else of it).
+fn rig_of_size(width: u32, height: u32) -> Rig {
+    Rig::rectified(Interior::pinhole_px(width, height, width as f64), 0.5)
+}
+
 /// The budget of the firmware for `settings` at `width` x `height`.
 pub fn budget_for(width: u32, height: u32, settings: &PipelineSettings) -> Result<MemoryBudget> {
     anyhow::ensure!(
         width >= 16 && height >= 16,
         "image size {width}x{height} is too small"
     );
-    let rig = Rig::rectified(Interior::pinhole_px(width, height, width as f64), 0.5);
-    let configure = settings.configure(&rig);
+    let configure = settings.configure(&rig_of_size(width, height));
     let mut budget = MemoryBudget::new();
     configuration_budget(&TraverseFactory, &configure, &mut budget)
         .map_err(|e| anyhow::anyhow!("configuration: {e:?}"))?;
@@ -119,10 +140,31 @@ pub fn report(args: &Args) -> Result<BudgetReport> {
 
 pub fn run(args: Args) -> Result<()> {
     let r = report(&args)?;
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&r)?);
-    } else {
+    if !args.json {
         print_table(&r);
+    }
+    // Linked after the table is out: a configuration that does not fit still shows
+    // where its bytes go.
+    let image = args
+        .part
+        .as_deref()
+        .map(|p| link_image(p, &args))
+        .transpose()?;
+    let measured = args.measured.as_deref().map(read_measured).transpose()?;
+    if args.json {
+        let all = serde_json::json!({
+            "budget": r,
+            "image": image,
+            "measured": measured,
+        });
+        println!("{}", serde_json::to_string_pretty(&all)?);
+    } else {
+        if let Some(i) = &image {
+            print_image(i);
+        }
+        if let Some(m) = &measured {
+            print_measured(m);
+        }
     }
     match (r.ram_bytes, r.fits_excluding_frames) {
         (Some(ram), Some(false)) => anyhow::bail!(
@@ -130,6 +172,100 @@ pub fn run(args: Args) -> Result<()> {
             r.working_excluding_frames
         ),
         _ => Ok(()),
+    }
+}
+
+/// The image linked for a part, beside the prediction it was sized from.
+#[derive(Debug, Serialize)]
+struct ImageFit {
+    part: String,
+    image: String,
+    predicted: StorageSizes,
+    /// The link buffers, a static of the image (in the budget above).
+    predicted_link_bytes: usize,
+    sections: Vec<Section>,
+    stack_reserved_bytes: u64,
+}
+
+/// Links the image for `part` at the configuration's sizes; a failed link is the error.
+fn link_image(part: &str, args: &Args) -> Result<ImageFit> {
+    let part = Part::named(part)?;
+    let settings = PipelineSettings::load(args.config.as_deref())?;
+    let configure = settings.configure(&rig_of_size(args.width, args.height));
+    let sizes = StorageSizes::for_configuration(&configure)?;
+    let image = build_image(&part, &sizes)?;
+    Ok(ImageFit {
+        part: part.name.into(),
+        image: image.display().to_string(),
+        predicted: sizes,
+        predicted_link_bytes: LinkBuffers::BYTES,
+        sections: elf_sections(&image)?,
+        stack_reserved_bytes: stack_reserved(&image)?,
+    })
+}
+
+fn print_image(i: &ImageFit) {
+    println!(
+        "\nfirmware image for {} (linked: the configuration fits)",
+        i.part
+    );
+    println!("  {:<14} {:>12} {:>12}", "section", "predicted", "linked");
+    let linked = |n: &str| section_bytes(&i.sections, n);
+    let rows: [(&str, Option<usize>, u64); 5] = [
+        (".text", None, linked(".text") + linked(".vector_table")),
+        (".rodata", None, linked(".rodata")),
+        (
+            ".data + .bss",
+            Some(i.predicted_link_bytes),
+            linked(".data") + linked(".bss"),
+        ),
+        (".arena", Some(i.predicted.arena_bytes), linked(".arena")),
+        (
+            ".frames",
+            Some(2 * i.predicted.frame_bytes),
+            linked(".frames"),
+        ),
+    ];
+    for (name, predicted, bytes) in rows {
+        let p = predicted.map_or("-".to_string(), |p| p.to_string());
+        println!("  {name:<14} {p:>12} {bytes:>12}");
+    }
+    println!(
+        "  {:<14} {:>12} {:>12}  (reserved; the high-water mark comes from a run: --link qemu)",
+        "stack", "-", i.stack_reserved_bytes
+    );
+    println!("  image: {}", i.image);
+}
+
+/// What a run measured, from its report.json.
+#[derive(Debug, Serialize)]
+struct Measured {
+    report: String,
+    capacities: Vec<CapacityLine>,
+    target: Option<TargetReport>,
+}
+
+fn read_measured(path: &std::path::Path) -> Result<Measured> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let r: RunReport = serde_json::from_str(&text)
+        .with_context(|| format!("{} is not a run's report.json", path.display()))?;
+    Ok(Measured {
+        report: path.display().to_string(),
+        capacities: r.capacities,
+        target: r.target,
+    })
+}
+
+fn print_measured(m: &Measured) {
+    println!("\nmeasured by the run {}", m.report);
+    println!("  {:<22} {:>10} {:>10}", "capacity", "reserved", "peak");
+    for c in &m.capacities {
+        println!("  {:<22} {:>10} {:>10}", c.name, c.reserved, c.peak);
+    }
+    if let Some(t) = &m.target {
+        print!("  {}", t.summary().replace('\n', "\n  ").trim_end());
+        println!();
     }
 }
 

@@ -4,7 +4,7 @@
 //! then evaluates the orientations against the ground truth and writes the report.
 use crate::commands::run::summary;
 use crate::dataset::Dataset;
-use crate::link::LinkOptions;
+use crate::link::{LinkKind, LinkOptions};
 use crate::pipeline::{Mode, PipelineSettings};
 use crate::runner::{run_dataset, RunOptions};
 use crate::synth::{generate, SynthOptions};
@@ -20,9 +20,17 @@ pub struct Args {
     /// system temporary directory's `phototraverse-demo`.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Number of epochs to synthesize.
-    #[arg(long, default_value_t = 40)]
-    pub frames: usize,
+    /// Number of epochs to synthesize (default 40; 8 on the emulated microcontroller,
+    /// whose UART takes about 10 s per 320x240 epoch).
+    #[arg(long)]
+    pub frames: Option<usize>,
+    /// Image size WxH (default: the scene's; 320x240 with `--link qemu`).
+    #[arg(long, value_parser = crate::commands::synth::parse_size)]
+    pub size: Option<(u32, u32)>,
+    /// Pipeline settings (TOML; default: the defaults, or with `--link qemu` the
+    /// embedded profile, configs/embedded-320x240.toml).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
     /// Scene to synthesize (straight, curves, seed2014, seed2006, hard).
     #[arg(long, default_value = "straight")]
     pub scene: String,
@@ -41,8 +49,19 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .out
         .unwrap_or_else(|| std::env::temp_dir().join("phototraverse-demo"));
     let dataset = out.join(&a.scene);
+    // On the emulated microcontroller the defaults are the microcontroller's: the
+    // embedded profile at its image size, and fewer epochs.
+    let on_mcu = matches!(a.link.link, LinkKind::Qemu(_));
     let mut opts = SynthOptions::new(&a.scene, dataset.clone());
-    opts.frames = Some(a.frames.max(3));
+    opts.frames = Some(a.frames.unwrap_or(if on_mcu { 8 } else { 40 }).max(3));
+    opts.size = a.size.or(on_mcu.then_some((320, 240)));
+    let mut settings = match &a.config {
+        Some(path) => PipelineSettings::from_file(path)?,
+        None if on_mcu => PipelineSettings::embedded(),
+        None => PipelineSettings::default(),
+    };
+    settings.mode = a.mode;
+    settings.estimate_rig |= a.estimate_rig;
     opts.progress = std::io::stderr().is_terminal();
     let s = generate(&opts)?;
     println!(
@@ -58,11 +77,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let results = out.join("run");
     let run = RunOptions {
         link: a.link,
-        settings: PipelineSettings {
-            mode: a.mode,
-            estimate_rig: a.estimate_rig,
-            ..PipelineSettings::default()
-        },
+        settings,
         max_epochs: None,
         progress: std::io::stderr().is_terminal(),
     };

@@ -148,8 +148,14 @@ pub fn run(args: Args) -> Result<()> {
 /// A few lines that say how the run went.
 pub fn summary(o: &RunOutcome) -> String {
     let r = &o.report;
+    // On QEMU the firmware's clock runs on instructions, not on time.
+    let clock = if r.target.is_some() {
+        " (QEMU's virtual time)"
+    } else {
+        ""
+    };
     let mut s = format!(
-        "mode {}: {} epochs, {} flagged, median {:.1} ms per epoch in the firmware\n",
+        "mode {}: {} epochs, {} flagged, median {:.1} ms per epoch in the firmware{clock}\n",
         r.mode,
         r.epochs.len(),
         r.flagged_epochs(),
@@ -201,6 +207,9 @@ pub fn summary(o: &RunOutcome) -> String {
                 .measured_bytes
                 .map_or("-".to_string(), |m| format!("{:.1} KiB", m as f64 / 1024.0))
         );
+    }
+    if let Some(t) = &r.target {
+        s += &t.summary();
     }
     if let Some(e) = &o.evaluation {
         s += &e.summary();

@@ -176,7 +176,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 }
 
 /// `WxH` -> (W, H).
-fn parse_size(s: &str) -> Result<(u32, u32), String> {
+pub(crate) fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("{s:?}: expected WxH, e.g. 320x240"))?;

@@ -5,6 +5,7 @@ pub mod child;
 pub mod fault;
 pub mod inproc;
 pub mod net;
+pub mod qemu;
 pub mod throttle;
 pub mod transport;
 
@@ -25,7 +26,12 @@ pub enum LinkKind {
     Tcp(Option<String>),
     /// A serial device.
     Serial(String),
+    /// The firmware image on a QEMU machine (its UART is the link).
+    Qemu(String),
 }
+
+/// The QEMU machine `--link qemu` runs.
+pub const DEFAULT_QEMU_MACHINE: &str = "mps2-an500";
 
 impl std::str::FromStr for LinkKind {
     type Err = String;
@@ -34,14 +40,18 @@ impl std::str::FromStr for LinkKind {
             "inproc" => LinkKind::InProc,
             "child" => LinkKind::Child,
             "tcp" => LinkKind::Tcp(None),
+            "qemu" => LinkKind::Qemu(DEFAULT_QEMU_MACHINE.into()),
             _ => {
                 if let Some(a) = s.strip_prefix("tcp:") {
                     LinkKind::Tcp(Some(a.to_string()))
                 } else if let Some(d) = s.strip_prefix("serial:") {
                     LinkKind::Serial(d.to_string())
+                } else if let Some(m) = s.strip_prefix("qemu:") {
+                    LinkKind::Qemu(m.to_string())
                 } else {
                     return Err(format!(
-                        "unknown link {s:?}: expected inproc, child, tcp, tcp:ADDR or serial:DEV"
+                        "unknown link {s:?}: expected inproc, child, tcp, tcp:ADDR, serial:DEV, \
+                         qemu or qemu:MACHINE"
                     ));
                 }
             }
@@ -66,7 +76,9 @@ pub enum FirmwareProcessor {
 pub struct LinkOptions {
     /// Link to the firmware: inproc, child (this program as `phototraverse firmware` over
     /// pipes; $PHOTOTRAVERSE_FIRMWARE names another firmware binary), tcp (start the
-    /// firmware on 127.0.0.1), tcp:ADDR, serial:DEV.
+    /// firmware on 127.0.0.1), tcp:ADDR, serial:DEV, qemu (the Cortex-M7 image, built for
+    /// the run's configuration, on QEMU's mps2-an500 machine; needs qemu-system-arm and
+    /// the Rust target thumbv7em-none-eabihf), qemu:MACHINE.
     #[arg(long, default_value = "child")]
     pub link: LinkKind,
     /// Limit the link to this baud rate (8N1, 10 bits per byte; also the serial device's rate).
@@ -154,8 +166,30 @@ impl LinkOptions {
         }
     }
 
+    /// For a QEMU link, the part it emulates and the image built for `configure`.
+    pub fn target_image(
+        &self,
+        configure: &phototraverse_core::protocol::messages::Configure,
+    ) -> anyhow::Result<Option<(crate::mcu::Part, std::path::PathBuf)>> {
+        let LinkKind::Qemu(machine) = &self.link else {
+            return Ok(None);
+        };
+        let part = crate::mcu::Part::for_qemu_machine(machine)?;
+        let sizes = crate::mcu::StorageSizes::for_configuration(configure)?;
+        let image = crate::mcu::build_image(&part, &sizes)?;
+        Ok(Some((part, image)))
+    }
+
     /// Opens the transport with its limiter and injector.
     pub fn open(&self) -> anyhow::Result<Box<dyn Transport>> {
+        self.open_with_image(None)
+    }
+
+    /// Opens the transport; a QEMU link runs `image` ([`LinkOptions::target_image`]).
+    pub fn open_with_image(
+        &self,
+        image: Option<(crate::mcu::Part, std::path::PathBuf)>,
+    ) -> anyhow::Result<Box<dyn Transport>> {
         for (name, p) in [
             ("--fault-ber", self.fault_ber),
             ("--fault-drop", self.fault_drop),
@@ -184,6 +218,15 @@ impl LinkOptions {
             LinkKind::Serial(dev) => Box::new(
                 net::SerialLink::open(dev, self.baud.unwrap_or(921_600)).context("serial link")?,
             ),
+            LinkKind::Qemu(machine) => {
+                let Some((part, image)) = image else {
+                    bail!(
+                        "the QEMU link ({machine}) runs an image built for the run's \
+                         configuration: use it with `run` or `demo`"
+                    );
+                };
+                Box::new(qemu::QemuLink::spawn(part, image)?)
+            }
         };
         let limited: Box<dyn Transport> = match self.baud {
             Some(b) if b > 0 => Box::new(throttle::Throttled::new(base, b)),
@@ -207,6 +250,14 @@ mod tests {
         assert_eq!("inproc".parse::<LinkKind>(), Ok(LinkKind::InProc));
         assert_eq!("child".parse::<LinkKind>(), Ok(LinkKind::Child));
         assert_eq!("tcp".parse::<LinkKind>(), Ok(LinkKind::Tcp(None)));
+        assert_eq!(
+            "qemu".parse::<LinkKind>(),
+            Ok(LinkKind::Qemu("mps2-an500".into()))
+        );
+        assert_eq!(
+            "qemu:mps2-an386".parse::<LinkKind>(),
+            Ok(LinkKind::Qemu("mps2-an386".into()))
+        );
         assert_eq!(
             "tcp:127.0.0.1:7000".parse::<LinkKind>(),
             Ok(LinkKind::Tcp(Some("127.0.0.1:7000".into())))

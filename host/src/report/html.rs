@@ -1,5 +1,5 @@
 //! `report.html`: a self-contained page with SVG plots (plotters) and tables.
-use super::records::{MemoryLine, RunReport};
+use super::records::{CapacityLine, MemoryLine, RunReport};
 use anyhow::{anyhow, Context, Result};
 use plotters::prelude::*;
 use std::fmt::Write as _;
@@ -443,6 +443,74 @@ fn memory_table(lines: &[MemoryLine]) -> String {
     t
 }
 
+fn capacity_table(lines: &[CapacityLine]) -> String {
+    let mut t =
+        String::from("<table><tr><th>capacity</th><th>reserved (items)</th><th>peak use</th></tr>");
+    for c in lines {
+        let _ = write!(
+            t,
+            "<tr><td>{}</td><td>{}</td><td>{}</td></tr>",
+            html_escape(&c.name),
+            c.reserved,
+            c.peak
+        );
+    }
+    t.push_str("</table>");
+    t
+}
+
+/// The run on the emulated microcontroller: its image's sections, its stack, and the
+/// instructions per stage with the labelled time estimate.
+fn target_section(t: &crate::mcu::TargetReport) -> String {
+    let mut s = format!(
+        "<h2>On the microcontroller ({})</h2><p>{}</p>\
+         <table><tr><th>section</th><th>address</th><th>bytes</th></tr>",
+        html_escape(&t.part),
+        html_escape(&t.description)
+    );
+    for sec in &t.sections {
+        let _ = write!(
+            s,
+            "<tr><td>{}</td><td>0x{:08x}</td><td>{}</td></tr>",
+            html_escape(&sec.name),
+            sec.address,
+            sec.bytes
+        );
+    }
+    if let Some(st) = &t.stack {
+        let _ = write!(
+            s,
+            "<tr><td>stack (high-water mark of {} reserved)</td><td></td><td>{}</td></tr>",
+            st.reserved_bytes, st.used_bytes
+        );
+    }
+    s.push_str("</table><table><tr><th>stage</th><th>instructions per epoch (median)</th><th>share</th></tr>");
+    for st in &t.time.stages {
+        let _ = write!(
+            s,
+            "<tr><td>{}</td><td>{:.2} M</td><td>{:.1} %</td></tr>",
+            html_escape(&st.stage),
+            st.instructions_median / 1e6,
+            100.0 * st.share
+        );
+    }
+    let e = &t.time.estimate;
+    let _ = write!(
+        s,
+        "</table><p>{:.1} M instructions per epoch (median; largest {:.1} M), counted by {}. \
+         <b>Estimate, not a measurement:</b> {:.0} ms per epoch on an {} at {:.0} MHz and {} \
+         cycles per instruction.</p>",
+        t.time.instructions_per_epoch_median / 1e6,
+        t.time.instructions_per_epoch_max / 1e6,
+        html_escape(&t.time.method),
+        e.ms_per_epoch_median,
+        html_escape(&e.part),
+        e.clock_hz / 1e6,
+        e.cycles_per_instruction
+    );
+    s
+}
+
 /// The evaluation (`crate::eval::Evaluation` as JSON) as two tables, rounded for reading.
 fn evaluation_table(ev: &serde_json::Value) -> String {
     let num = |k: &str| ev.get(k).and_then(serde_json::Value::as_f64);
@@ -663,9 +731,14 @@ pub fn write_html(path: &Path, report: &RunReport) -> Result<()> {
     }
     let _ = write!(
         page,
-        "<h2>Memory, predicted and measured</h2>{}</body></html>",
-        memory_table(&report.memory)
+        "<h2>Memory, predicted and measured</h2>{}{}",
+        memory_table(&report.memory),
+        capacity_table(&report.capacities)
     );
+    if let Some(t) = &report.target {
+        let _ = write!(page, "{}", target_section(t));
+    }
+    page.push_str("</body></html>");
     std::fs::write(path, page).with_context(|| format!("cannot write {}", path.display()))
 }
 
@@ -720,6 +793,11 @@ mod tests {
             predicted_bytes: 10,
             measured_bytes: Some(9),
         }];
+        report.capacities = vec![CapacityLine {
+            name: "window_points".into(),
+            peak: 177,
+            reserved: 252,
+        }];
         report.evaluation = Some(serde_json::json!({
             "translation_drift_pct": 0.25,
             "ate_rmse_m": 0.0123456,
@@ -750,6 +828,39 @@ mod tests {
             assert!(page.contains(title), "{title} missing");
         }
         assert!(page.contains("straight &lt;synthetic&gt;"));
+        assert!(page.contains("<td>window_points</td><td>252</td><td>177</td>"));
+        assert!(!page.contains("On the microcontroller"));
+
+        // A run on the emulated microcontroller: its sections, stack and instructions.
+        let mut t = [0u32; phototraverse_core::protocol::messages::stage::COUNT];
+        t[1] = 170_000;
+        t[6] = 9_000;
+        report.target = Some(crate::mcu::TargetReport {
+            part: "mps2-an500".into(),
+            description: "Cortex-M7".into(),
+            qemu_machine: Some("mps2-an500".into()),
+            image: "image".into(),
+            sections: vec![crate::mcu::Section {
+                name: ".text".into(),
+                address: 0x400,
+                bytes: 339_020,
+            }],
+            predicted: crate::mcu::StorageSizes {
+                arena_bytes: 504_573,
+                frame_bytes: 76_800,
+            },
+            stack: Some(crate::mcu::StackReport {
+                used_bytes: 31_516,
+                reserved_bytes: 4_174_752,
+            }),
+            time: crate::mcu::target_time(&[t]),
+        });
+        write_html(&path, &report).unwrap();
+        let page = std::fs::read_to_string(&path).unwrap();
+        assert!(page.contains("<td>.text</td><td>0x00000400</td><td>339020</td>"));
+        assert!(page.contains("<td>31516</td>"));
+        assert!(page.contains("<td>sift_left</td><td>170.00 M</td><td>95.0 %</td>"));
+        assert!(page.contains("Estimate, not a measurement:"));
 
         // With fixes at some epochs and times: the GNSS plots and the speed.
         for (k, e) in report.epochs.iter_mut().enumerate() {

@@ -16,7 +16,7 @@ pub use export::{efoto_image_index, write_efoto, write_eop_csv, write_ply};
 pub use html::write_html;
 pub use points::TieCollector;
 pub use records::{
-    sigmas_in_degrees, CameraEop, EpochChi2, EpochRecord, EpochStatus, GnssRecord,
+    sigmas_in_degrees, CameraEop, CapacityLine, EpochChi2, EpochRecord, EpochStatus, GnssRecord,
     ImageMeasurement, MemoryLine, QualitySummary, RigReport, RunReport, TiePoint, VelocityRecord,
 };
 pub use velocity::velocities;

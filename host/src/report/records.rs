@@ -274,6 +274,22 @@ pub struct RunReport {
     /// sigma0 and the chi-square tests over all adjusted epochs.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub quality: Option<QualitySummary>,
+    /// Each capacity's highest use during the run against what it reserves, as the
+    /// firmware counted it.
+    #[serde(default)]
+    pub capacities: Vec<CapacityLine>,
+    /// Sections, stack and instructions measured on the emulated microcontroller
+    /// (`--link qemu`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target: Option<crate::mcu::TargetReport>,
+}
+
+/// The highest use of a capacity against the items it reserves.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct CapacityLine {
+    pub name: String,
+    pub peak: u32,
+    pub reserved: u32,
 }
 
 /// The estimated relative orientation and base, with the calibration it started from.
