@@ -5,7 +5,8 @@
 //! - `PHOTOTRAVERSE_PART`: a file `parts/<name>.x` (default `mps2-an500`);
 //! - `PHOTOTRAVERSE_ARENA_BYTES`, `PHOTOTRAVERSE_FRAME_BYTES`: the arena (everything the
 //!   configuration needs but the frames and the link buffers) and one frame buffer, as
-//!   the host's memory budget predicts them (`phototraverse image` sets them).
+//!   the host's memory budget predicts them (`phototraverse run --link qemu` and
+//!   `phototraverse budget --part` set them).
 use std::{env, fs, path::PathBuf};
 
 fn main() {
@@ -33,7 +34,7 @@ fn main() {
 
     let bytes = |var: &str| -> usize {
         let v = env::var(var).unwrap_or_else(|_| {
-            panic!("{var} is not set: build the image with `phototraverse image`, which sizes it from a configuration")
+            panic!("{var} is not set: the image is built by `phototraverse run --link qemu` or `phototraverse budget --part`, which size it from a configuration")
         });
         v.trim()
             .parse()

@@ -2,6 +2,7 @@
 //! memory map, its storage sized from a configuration at build time (so a
 //! configuration that does not fit fails to link), and what the image and a run on the
 //! emulated part measure: the ELF's sections, the stack, the instructions per stage.
+use crate::runner::median;
 use anyhow::{bail, Context, Result};
 use phototraverse_core::budget::{ComponentKind, MemoryBudget};
 use phototraverse_core::protocol::messages::{stage, Configure};
@@ -301,19 +302,6 @@ const PROCESSING: [usize; 6] = [
     stage::ADJUST,
 ];
 
-fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
-}
-
 /// The instruction counts of a run on the emulated core, from its per-epoch timings.
 pub fn target_time(timings_us: &[[u32; stage::COUNT]]) -> TargetTime {
     let insns = |t: &[u32; stage::COUNT], s: usize| t[s] as f64 * INSTRUCTIONS_PER_US;
@@ -321,12 +309,12 @@ pub fn target_time(timings_us: &[[u32; stage::COUNT]]) -> TargetTime {
         .iter()
         .map(|t| PROCESSING.iter().map(|&s| insns(t, s)).sum())
         .collect();
-    let epoch_median = median(per_epoch.clone());
+    let epoch_median = median(&mut per_epoch.clone());
     let epoch_max = per_epoch.iter().copied().fold(0.0, f64::max);
     let stages = PROCESSING
         .iter()
         .map(|&s| {
-            let m = median(timings_us.iter().map(|t| insns(t, s)).collect());
+            let m = median(&mut timings_us.iter().map(|t| insns(t, s)).collect::<Vec<_>>());
             StageInstructions {
                 stage: stage::NAMES[s].to_string(),
                 instructions_median: m,

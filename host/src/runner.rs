@@ -1,7 +1,7 @@
 //! `phototraverse run`: a dataset streamed through the emulated rig link to the
 //! firmware, which runs the core traverse; the answers become `poses.txt`,
-//! `eop.csv`, `points.ply`, `efoto/` (E-Foto's point import), `report.json`
-//! and `report.html` in the output directory. After each result the host pulls
+//! `eop.csv`, `points.ply`, `efoto/` (E-Foto's point import), `colmap/` (a COLMAP
+//! text model), `report.json` and `report.html` in the output directory. After each result the host pulls
 //! the tie points and observations that became final (protocol `Points`), and
 //! at the end asks the firmware to flush its window.
 //!
@@ -599,7 +599,8 @@ fn capacity_lines(stats: &messages::Stats) -> Vec<CapacityLine> {
         .collect()
 }
 
-fn median(v: &mut [f64]) -> f64 {
+/// The median of the run's figures (the upper one of an even count); 0 when empty.
+pub(crate) fn median(v: &mut [f64]) -> f64 {
     if v.is_empty() {
         return 0.0;
     }

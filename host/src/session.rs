@@ -960,7 +960,8 @@ impl<T: Transport> Session<T> {
     }
 }
 
-/// Opens the link the options name and says hello: what `phototraverse run` calls.
+/// Opens the link the options name and says hello (`run_dataset` does the same with
+/// the image a QEMU link needs).
 pub fn connect(link: &LinkOptions) -> anyhow::Result<Session<Box<dyn Transport>>> {
     let t = link.open()?;
     Ok(Session::open(t, SessionOptions::from_link(link))?)

@@ -55,6 +55,15 @@ fn profile() -> String {
         .to_string()
 }
 
+/// The element of the JSON array `list` whose `key` is `name`.
+fn named<'a>(list: &'a serde_json::Value, key: &str, name: &str) -> &'a serde_json::Value {
+    list.as_array()
+        .unwrap()
+        .iter()
+        .find(|v| v[key] == name)
+        .unwrap_or_else(|| panic!("no {key} {name} in {list}"))
+}
+
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -117,12 +126,9 @@ fn the_cortex_m7_image_orients_a_sequence_as_the_hosted_firmware_does() {
     let t = &r["target"];
     assert_eq!(t["part"], "mps2-an500");
     let section = |name: &str| {
-        t["sections"]
-            .as_array()
+        named(&t["sections"], "name", name)["bytes"]
+            .as_u64()
             .unwrap()
-            .iter()
-            .find(|s| s["name"] == name)
-            .map_or(0, |s| s["bytes"].as_u64().unwrap())
     };
     assert!(section(".text") > 100_000, "{t}");
     // The statics were sized from the configuration's prediction.
@@ -141,23 +147,13 @@ fn the_cortex_m7_image_orients_a_sequence_as_the_hosted_firmware_does() {
     assert_eq!(time["epochs"], 4);
     let per_epoch = time["instructions_per_epoch_median"].as_f64().unwrap();
     assert!(per_epoch > 1e6, "{time}");
-    let sift = time["stages"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|s| s["stage"] == "sift_left")
-        .unwrap();
+    let sift = named(&time["stages"], "stage", "sift_left");
     assert!(sift["instructions_median"].as_f64().unwrap() > 0.0);
     // Capacities: counted on the target, within what they reserve.
     for c in r["capacities"].as_array().unwrap() {
         assert!(c["peak"].as_u64() <= c["reserved"].as_u64(), "{c}");
     }
-    let kp = r["capacities"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|c| c["name"] == "keypoints_per_image")
-        .unwrap();
+    let kp = named(&r["capacities"], "name", "keypoints_per_image");
     assert!(kp["peak"].as_u64().unwrap() > 0);
     // The hosted run has the capacities too, and no target.
     let hosted = json(&child.join("report.json"));

@@ -201,12 +201,20 @@ pub fn summary(o: &RunOutcome) -> String {
     }
     if let Some(total) = r.memory.iter().find(|m| m.name.starts_with("total")) {
         s += &format!(
-            "memory: {:.1} KiB predicted, {} measured\n",
+            "memory: {:.1} KiB predicted, {} carved from the firmware's arena\n",
             total.predicted_bytes as f64 / 1024.0,
             total
                 .measured_bytes
                 .map_or("-".to_string(), |m| format!("{:.1} KiB", m as f64 / 1024.0))
         );
+    }
+    if !r.capacities.is_empty() {
+        let peaks: Vec<String> = r
+            .capacities
+            .iter()
+            .map(|c| format!("{} {}/{}", c.name, c.peak, c.reserved))
+            .collect();
+        s += &format!("capacities, peak/reserved: {}\n", peaks.join(", "));
     }
     if let Some(t) = &r.target {
         s += &t.summary();

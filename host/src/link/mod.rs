@@ -1,5 +1,5 @@
 //! Host side of the emulated rig link: transports (in-process, child process,
-//! TCP, serial device), bandwidth limit and fault injection, selected by
+//! TCP, serial device, the microcontroller image under QEMU), bandwidth limit and fault injection, selected by
 //! [`LinkOptions`] (flattened into `phototraverse run`).
 pub mod child;
 pub mod fault;

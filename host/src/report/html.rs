@@ -426,7 +426,7 @@ fn stage_series(report: &RunReport) -> Vec<Series> {
 
 fn memory_table(lines: &[MemoryLine]) -> String {
     let mut t = String::from(
-        "<table><tr><th>component</th><th>kind</th><th>predicted (bytes)</th><th>measured (bytes)</th></tr>",
+        "<table><tr><th>component</th><th>kind</th><th>predicted (bytes)</th><th>carved (bytes)</th></tr>",
     );
     for l in lines {
         let measured = l.measured_bytes.map_or("-".to_string(), |m| m.to_string());
@@ -731,7 +731,7 @@ pub fn write_html(path: &Path, report: &RunReport) -> Result<()> {
     }
     let _ = write!(
         page,
-        "<h2>Memory, predicted and measured</h2>{}{}",
+        "<h2>Memory, predicted and carved; capacities, reserved and used at most</h2>{}{}",
         memory_table(&report.memory),
         capacity_table(&report.capacities)
     );
