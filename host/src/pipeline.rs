@@ -5,8 +5,10 @@ use phototraverse_core::camera::{CalibrationPrecision, Interior, Pose, Rig};
 use phototraverse_core::protocol::messages::{
     AdjustMode, Configure, Pipeline, TraverseSettings, CONFIG_VERSION,
 };
-use phototraverse_core::traverse::config::{
-    TRAVERSE_CONTRAST, TRAVERSE_FIXED_EPOCHS, TRAVERSE_OCTAVES, TRAVERSE_WINDOW,
+use phototraverse_core::traverse::defaults::{
+    TRAVERSE_CONTRAST, TRAVERSE_DISPARITY_FRACTION, TRAVERSE_EDGE_RATIO, TRAVERSE_FIXED_EPOCHS,
+    TRAVERSE_KEYPOINTS, TRAVERSE_MATCH_RATIO, TRAVERSE_OCTAVES, TRAVERSE_SCALES, TRAVERSE_TRACKS,
+    TRAVERSE_WINDOW,
 };
 use phototraverse_core::traverse::TraverseMode;
 use serde::{Deserialize, Serialize};
@@ -117,16 +119,16 @@ pub struct PipelineSettings {
 impl Default for PipelineSettings {
     fn default() -> Self {
         PipelineSettings {
-            keypoints_per_image: 1000,
+            keypoints_per_image: TRAVERSE_KEYPOINTS as u32,
             octaves: TRAVERSE_OCTAVES as u8,
-            scales_per_octave: 3,
+            scales_per_octave: TRAVERSE_SCALES as u8,
             contrast_threshold: TRAVERSE_CONTRAST,
             fine_octave: false,
-            edge_ratio: 10.0,
-            match_ratio: 0.8,
+            edge_ratio: TRAVERSE_EDGE_RATIO,
+            match_ratio: TRAVERSE_MATCH_RATIO,
             max_disparity_px: None,
             window: TRAVERSE_WINDOW as u16,
-            track_capacity: 600,
+            track_capacity: TRAVERSE_TRACKS as u32,
             fixed_epochs: TRAVERSE_FIXED_EPOCHS as u16,
             mode: Mode::Window,
             estimate_rig: false,
@@ -222,7 +224,9 @@ impl PipelineSettings {
                 contrast_threshold: self.contrast_threshold,
                 edge_ratio: self.edge_ratio,
                 match_ratio: self.match_ratio,
-                max_disparity_px: self.max_disparity_px.unwrap_or(w as f32 * 0.5),
+                max_disparity_px: self
+                    .max_disparity_px
+                    .unwrap_or(w as f32 * TRAVERSE_DISPARITY_FRACTION),
                 fine_octave: self.fine_octave,
                 fixed_epochs: Some(self.fixed_epochs),
             },

@@ -11,6 +11,7 @@ use crate::matching::{MatchConfig, RefineConfig, StereoGeometry};
 use crate::sift::SiftConfig;
 
 use super::area::AreaTie;
+use super::defaults::*;
 use super::patches::Patches;
 use super::{Refined, TrackPoint};
 
@@ -136,39 +137,8 @@ impl Default for CalibrationCheck {
     }
 }
 
-/// Scale-space octaves of the traverse: four reach keypoints of sigma 25 px at 640x480,
-/// far beyond what stays matchable between epochs.
-pub const TRAVERSE_OCTAVES: usize = 4;
-
-/// Epochs in the traverse's adjustment window: with the tie points carried on by area
-/// matching, longer windows cost in proportion and gave no better drift on the rendered
-/// streets (docs/traverse.md, "Window length").
-pub const TRAVERSE_WINDOW: usize = 3;
-
-/// Epochs that left the window whose observations still constrain their points
-/// ([`AdjustConfig::fixed_epochs`]).
-pub const TRAVERSE_FIXED_EPOCHS: usize = 8;
-
-/// Inflation of the carried prior of the window's first epoch
-/// ([`AdjustConfig::carried_prior_inflation`]).
-pub const TRAVERSE_PRIOR_INFLATION: f64 = 1000.0;
-
-/// Descriptor samples per axis in the traverse ([`SiftConfig::descriptor_grid`]).
-pub const TRAVERSE_DESCRIPTOR_GRID: usize = 12;
-
 /// Shortest window with the rig estimated ([`TraverseConfig::with_rig_estimation`]).
 pub const RIG_ESTIMATION_WINDOW: usize = 8;
-
-/// Motion smoothness of the traverse: sigma of the change of velocity between
-/// consecutive steps, in the camera's frame, m/s. 2 m/s per 0.1 s step (the rendered
-/// streets' 10 Hz): 0.5 held the speed too tightly where it changes (`curves@320` went
-/// from 0.29 to 0.89 % drift), 1.0 still lost more epochs on `drive@320`
-/// (bench/traverse/README.md).
-pub const TRAVERSE_VELOCITY_SIGMA: f64 = 2.0;
-
-/// DoG contrast threshold of the traverse (grey levels / 255): lower than SIFT's
-/// usual 0.04, for the area tracks it feeds (docs/configuration.md).
-pub const TRAVERSE_CONTRAST: f32 = 0.015;
 
 impl TraverseConfig {
     /// Defaults for a rig and image size: 1000 keypoints per image at contrast 0.015,
@@ -176,20 +146,24 @@ impl TraverseConfig {
     /// base-length and smoothness constraints switched on.
     pub fn for_rig(rig: Rig, datum: Pose) -> Self {
         let (w, h) = (rig.left.width_px, rig.left.height_px);
-        let max_keypoints = 1000;
+        let max_keypoints = TRAVERSE_KEYPOINTS;
         let sift = SiftConfig {
             max_width: w as usize,
             max_height: h as usize,
             max_keypoints,
             octaves: TRAVERSE_OCTAVES,
             contrast_threshold: TRAVERSE_CONTRAST,
+            levels: TRAVERSE_SCALES,
+            edge_threshold: TRAVERSE_EDGE_RATIO,
             // Descriptors only pair the features; positions come from the NCC refinement.
             // 12 x 12 gradient samples instead of 20 x 20 cost 2.4x less per descriptor
             // and gave the same drift on the rendered streets (docs/traverse.md, Speed).
             descriptor_grid: TRAVERSE_DESCRIPTOR_GRID,
             ..SiftConfig::default()
         };
-        let mut matching = MatchConfig::rectified(w, h, max_keypoints, w as f32 * 0.5);
+        let mut matching =
+            MatchConfig::rectified(w, h, max_keypoints, w as f32 * TRAVERSE_DISPARITY_FRACTION);
+        matching.ratio = TRAVERSE_MATCH_RATIO;
         let ideal = rig.relative_angles == [0.0; 3]
             && rig.base_m[1] == 0.0
             && rig.base_m[2] == 0.0
@@ -209,7 +183,7 @@ impl TraverseConfig {
             ..RefineConfig::default()
         });
         matching.max_tie_points = MAX_TIE_POINTS;
-        matching.max_tracks = 600;
+        matching.max_tracks = TRAVERSE_TRACKS;
         let window = TRAVERSE_WINDOW;
         matching.track_history = window;
         let adjust = AdjustConfig {

@@ -182,7 +182,7 @@ impl<'a> Patches<'a> {
         self.n == 0
     }
 
-    /// Templates that did not fit since the last [`Patches::clear`].
+    /// Templates that did not fit since the last [`Patches::begin`].
     pub fn dropped(&self) -> u32 {
         self.dropped
     }

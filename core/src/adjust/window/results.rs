@@ -95,7 +95,7 @@ impl<'a> Window<'a> {
 
     /// Standard deviations of slot `i` relative to the recent past (the fixed epochs held
     /// exact), at no less than their a-priori value, as a fixed epoch keeps them
-    /// ([`Self::leaving_covariance`]): what a difference of neighbouring epochs is
+    /// (`leaving_covariance`): what a difference of neighbouring epochs is
     /// uncertain by.
     pub fn epoch_relative_std(&self, i: usize) -> Option<[f64; 6]> {
         let k = libm::sqrt(self.apriori_floor());

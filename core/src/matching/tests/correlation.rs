@@ -1,0 +1,279 @@
+//! Area correlation: NCC refinement to sub-pixel, the motion check, magnified and
+//! recentred templates.
+use super::*;
+
+/// A sum of sines `(amplitude, x frequency, y frequency, phase)` around grey 128,
+/// sampled at a horizontal shift.
+fn sines(w: usize, h: usize, shift: f64, waves: &[(f64, f64, f64, f64)]) -> Vec<u8> {
+    let mut img = vec![0u8; w * h];
+    for r in 0..h {
+        for c in 0..w {
+            let (x, y) = (c as f64 + shift, r as f64);
+            let v = waves.iter().fold(128.0, |v, &(a, fx, fy, ph)| {
+                v + a * libm::sin(fx * x + fy * y + ph)
+            });
+            img[r * w + c] = v.round().clamp(0.0, 255.0) as u8;
+        }
+    }
+    img
+}
+
+/// A textured image, sampled at a horizontal shift.
+fn texture(w: usize, h: usize, shift: f64) -> Vec<u8> {
+    let waves = [
+        (40.0, 0.31, 0.17, 0.0),
+        (35.0, 0.13, -0.29, 1.0),
+        (25.0, 0.53, 0.41, 2.0),
+    ];
+    sines(w, h, shift, &waves)
+}
+
+/// A texture of broad features (a photograph magnified on a near facade).
+fn broad_texture(w: usize, h: usize, shift: f64) -> Vec<u8> {
+    let waves = [
+        (50.0, 0.16, 0.09, 0.0),
+        (40.0, 0.07, -0.15, 1.0),
+        (20.0, 0.23, 0.12, 2.0),
+    ];
+    sines(w, h, shift, &waves)
+}
+
+#[test]
+fn ncc_refinement_recovers_subpixel_disparity() {
+    let (w, h) = (120, 60);
+    let left = texture(w, h, 0.0);
+    // right(c) = left(c + 10.37): the match of left x is right x - 10.37.
+    let right = texture(w, h, 10.37);
+    let (li, ri) = (
+        ImageView::new(&left, w, h).unwrap(),
+        ImageView::new(&right, w, h).unwrap(),
+    );
+    let cfg = RefineConfig {
+        min_ncc: 0.9,
+        ..Default::default()
+    };
+    for x in [40.0f32, 55.3, 70.8] {
+        let start = [x - 10.0, 30.0]; // a keypoint 0.37 px off
+        let (p, score) = refine_match(&li, &ri, [x, 30.0], start, &cfg).unwrap();
+        assert!(score > 0.95);
+        assert!(
+            (p[0] - (x - 10.37)).abs() < 0.08,
+            "{} vs {}",
+            p[0],
+            x - 10.37
+        );
+        assert_eq!(p[1], 30.0);
+    }
+    // Flat image, border, peak beyond the search radius.
+    let flat = vec![100u8; w * h];
+    let fi = ImageView::new(&flat, w, h).unwrap();
+    assert_eq!(
+        refine_match(&fi, &ri, [50.0, 30.0], [40.0, 30.0], &cfg),
+        Err(refine::RefineError::Flat)
+    );
+    assert_eq!(
+        refine_match(&li, &ri, [2.0, 30.0], [1.0, 30.0], &cfg),
+        Err(refine::RefineError::Border)
+    );
+    assert!(refine_match(&li, &ri, [50.0, 30.0], [45.0, 30.0], &cfg).is_err());
+    assert_eq!(
+        refine_match(&li, &ri, [f32::NAN, 30.0], [45.0, 30.0], &cfg),
+        Err(refine::RefineError::Border)
+    );
+}
+
+#[test]
+fn motion_check_removes_consistent_wrong_loops() {
+    // Quads that close their loop but were matched to a neighbour in both current images
+    // (a repeated window) are found by the rigid-motion check; the true ones all stay.
+    let rig = rectified_rig();
+    let prev = pose_at(0.0);
+    let cur = Pose::from_degrees(90.3, 0.1, -0.2, [0.05, 0.9, 0.01]);
+    let scene = SyntheticScene::street(51);
+    let mut obs = Vec::new();
+    for id in 0..400 {
+        let p = scene.point(id);
+        let px = |pose: &Pose, cam: &Interior| project_to_pixel(pose, cam, &p).ok();
+        let v = [
+            px(&prev, &rig.left),
+            px(&rig.right_pose(&prev), &rig.right),
+            px(&cur, &rig.left),
+            px(&rig.right_pose(&cur), &rig.right),
+        ];
+        if let [Some(a), Some(b), Some(c), Some(d)] = v {
+            obs.push([a, b, c, d].map(|q| [q[0] as f32, q[1] as f32]));
+        }
+    }
+    let n = obs.len();
+    let mut wrong = 0;
+    for (i, o) in obs.iter_mut().enumerate() {
+        if i % 10 == 3 {
+            // Both current observations shifted together: the stereo loop still closes.
+            o[2][0] += 9.0;
+            o[3][0] += 9.0;
+            wrong += 1;
+        }
+    }
+    motion::to_corrected(&rig, &mut obs);
+    let mut pts = vec![[0.0f64; 3]; 2 * n];
+    let mut inlier = vec![0u8; n];
+    let cfg = motion::MotionCheckConfig::default();
+    let m = motion::check_motion(&rig, &cfg, &obs, &mut pts, &mut inlier, 1).expect("enough quads");
+    for (i, &f) in inlier.iter().enumerate() {
+        assert_eq!(f == 1, i % 10 != 3, "quad {i}");
+    }
+    assert_eq!(inlier.iter().filter(|&&f| f == 0).count(), wrong);
+    // The motion found is the true one (in the previous camera frame).
+    let truth = relative_motion(&prev, &cur);
+    let t_true = -(truth.rotation() * truth.centre_vec());
+    assert!((m.t - t_true).norm() < 0.05, "{} vs {}", m.t, t_true);
+    // Too few quads: no verdict, everything kept.
+    let mut few = vec![0u8; 5];
+    let cfg = motion::MotionCheckConfig {
+        min_quads: 8,
+        ..cfg
+    };
+    assert!(motion::check_motion(&rig, &cfg, &obs[..5], &mut pts, &mut few, 1).is_none());
+    assert!(few.iter().all(|&f| f == 1));
+}
+
+#[test]
+fn magnified_template_keeps_its_centre_and_scales_a_ramp() {
+    use super::refine::{magnify_template, TEMPLATE_LEN};
+    let h = 4usize;
+    let n = 2 * h + 1;
+    let mut tpl = [0f32; TEMPLATE_LEN];
+    for v in 0..n {
+        for u in 0..n {
+            tpl[v * n + u] = 3.0 * u as f32 + 7.0 * v as f32;
+        }
+    }
+    let mut out = [0f32; TEMPLATE_LEN];
+    assert!(magnify_template(&tpl, h, 1.0, &mut out));
+    assert_eq!(out[..n * n], tpl[..n * n]);
+    assert!(magnify_template(&tpl, h, 2.0, &mut out));
+    let centre = h * n + h;
+    assert!((out[centre] - tpl[centre]).abs() < 1e-4);
+    // Twice as large: half the slope on each axis, around the same centre.
+    assert!((out[centre + 1] - out[centre] - 1.5).abs() < 1e-4);
+    assert!((out[centre + n] - out[centre] - 3.5).abs() < 1e-4);
+    // Shrinking would read outside the template: refused.
+    assert!(!magnify_template(&tpl, h, 0.9, &mut out));
+    assert!(!magnify_template(&tpl, 0, 1.5, &mut out));
+}
+
+#[test]
+fn a_recentred_correlation_does_not_lean_towards_its_start() {
+    let (w, h) = (120, 60);
+    let left = broad_texture(w, h, 0.0);
+    // right(c) = left(c + 10.37): left x = 60 is at right x = 49.63.
+    let right = broad_texture(w, h, 10.37);
+    let (li, ri) = (
+        ImageView::new(&left, w, h).unwrap(),
+        ImageView::new(&right, w, h).unwrap(),
+    );
+    let mut tpl = [0f32; refine::TEMPLATE_LEN];
+    refine::sample_template(&li, [60.0, 30.0], 4, &mut tpl).unwrap();
+    // The same match searched from starts a fraction of a pixel either side of it.
+    let spread = |f: &dyn Fn([f32; 2]) -> [f32; 2]| {
+        let xs: std::vec::Vec<f32> = (-4..=4)
+            .map(|i| f([49.63 + 0.1 * i as f32, 30.0])[0])
+            .collect();
+        let (lo, hi) = xs
+            .iter()
+            .fold((f32::MAX, f32::MIN), |a, &x| (a.0.min(x), a.1.max(x)));
+        hi - lo
+    };
+    let single = spread(&|s| refine::correlate(&tpl, 4, &ri, s, (2, 0), 0.9).unwrap().0);
+    let centred = spread(&|s| {
+        let found = refine::correlate(&tpl, 4, &ri, s, (2, 0), 0.9).unwrap();
+        refine::recentre(&tpl, 4, &ri, found, (1, 0), 0.9).0
+    });
+    // Measured: 0.032 px from the single fit, 0.002 px re-centred.
+    assert!(single > 0.02, "single fit: {single} px");
+    assert!(centred < 0.005, "re-centred: {centred} px");
+}
+
+/// `correlate` (lanes of offsets summed side by side) against a window-by-window NCC in
+/// f64 with the same sub-pixel parabola: the same peak, the same position.
+#[test]
+fn correlate_agrees_with_a_direct_ncc_at_every_search_size() {
+    let (w, h) = (120usize, 80usize);
+    let img: Vec<u8> = (0..w * h)
+        .map(|i| {
+            let (x, y) = ((i % w) as f64, (i / w) as f64);
+            (128.0 + 60.0 * (0.31 * x + 0.17 * y).sin() + 40.0 * (0.23 * y - 0.11 * x).cos()) as u8
+        })
+        .collect();
+    let iv = ImageView::new(&img, w, h).unwrap();
+    let bil = |x: f64, y: f64| {
+        let (c, r) = (x.floor() as usize, y.floor() as usize);
+        let (fx, fy) = (x - c as f64, y - r as f64);
+        let p = |cc: usize, rr: usize| img[rr * w + cc] as f64;
+        (p(c, r) * (1.0 - fx) + p(c + 1, r) * fx) * (1.0 - fy)
+            + (p(c, r + 1) * (1.0 - fx) + p(c + 1, r + 1) * fx) * fy
+    };
+    // Starts off the template's position (60.3, 40.2), so most peaks are off centre.
+    let cases = [
+        (4usize, (1usize, 0usize), [60.1f32, 40.2f32]),
+        (4, (2, 2), [61.2, 39.4]),
+        (3, (4, 4), [62.4, 38.9]),
+        (7, (3, 1), [58.5, 40.0]),
+    ];
+    for (half, (rx, ry), start) in cases {
+        let mut tpl = [0f32; refine::TEMPLATE_LEN];
+        refine::sample_template(&iv, [60.3, 40.2], half, &mut tpl).unwrap();
+        let n = 2 * half + 1;
+        let t: Vec<f64> = tpl[..n * n].iter().map(|&v| v as f64).collect();
+        let tm = t.iter().sum::<f64>() / t.len() as f64;
+        let ncc = |ox: f64, oy: f64| {
+            let s: Vec<f64> = (0..n * n)
+                .map(|k| {
+                    let (u, v) = ((k % n) as f64, (k / n) as f64);
+                    bil(
+                        start[0] as f64 + ox + u - half as f64,
+                        start[1] as f64 + oy + v - half as f64,
+                    )
+                })
+                .collect();
+            let sm = s.iter().sum::<f64>() / s.len() as f64;
+            let cross: f64 = s.iter().zip(&t).map(|(a, b)| (a - sm) * (b - tm)).sum();
+            let ss: f64 = s.iter().map(|a| (a - sm) * (a - sm)).sum();
+            let tt: f64 = t.iter().map(|b| (b - tm) * (b - tm)).sum();
+            cross / (ss * tt).sqrt()
+        };
+        let (mut best, mut at) = (f64::MIN, (0i32, 0i32));
+        for oy in -(ry as i32)..=ry as i32 {
+            for ox in -(rx as i32)..=rx as i32 {
+                let v = ncc(ox as f64, oy as f64);
+                if v > best {
+                    (best, at) = (v, (ox, oy));
+                }
+            }
+        }
+        let vertex = |a: f64, b: f64, c: f64| (0.5 * (a - c) / (a - 2.0 * b + c)).clamp(-0.5, 0.5);
+        let (bx, by) = (at.0 as f64, at.1 as f64);
+        let dx = vertex(ncc(bx - 1.0, by), best, ncc(bx + 1.0, by));
+        let dy = if ry > 0 {
+            vertex(ncc(bx, by - 1.0), best, ncc(bx, by + 1.0))
+        } else {
+            0.0
+        };
+        let (p, peak) = refine::correlate(&tpl, half, &iv, start, (rx, ry), 0.5).unwrap();
+        let what = std::format!("half {half}, radius ({rx}, {ry})");
+        assert!(
+            (peak as f64 - best).abs() < 1e-4,
+            "{what}: peak {peak} vs {best}"
+        );
+        assert!(
+            (p[0] as f64 - (start[0] as f64 + bx + dx)).abs() < 2e-3,
+            "{what}: x {}",
+            p[0]
+        );
+        assert!(
+            (p[1] as f64 - (start[1] as f64 + by + dy)).abs() < 2e-3,
+            "{what}: y {}",
+            p[1]
+        );
+    }
+}

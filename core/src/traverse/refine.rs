@@ -1,0 +1,186 @@
+//! Temporal refinement by image patches: the previous epoch's templates of the tie
+//! points are correlated in the current image at their predicted scale, and the patches
+//! kept for the next epoch.
+use super::*;
+
+impl Traverse<'_> {
+    /// Moves each tie point's current left position onto the spot its left template
+    /// shows (magnified by the point's scale change since the template's anchor
+    /// epoch), then re-refines the right position from there (see `patches`).
+    pub(super) fn refine_temporal(&mut self, left: &ImageView, right: &ImageView) {
+        let (Some(patches), Some(rcfg)) = (&self.patches, self.cfg.matching.refine) else {
+            return;
+        };
+        let h = rcfg.half_window as usize;
+        let rad = rcfg.search_radius as usize;
+        let mut tpl = [0f32; TEMPLATE_LEN];
+        let mut n = 0;
+        for tie in self.matcher.tie_points() {
+            if n >= self.refined.len() {
+                break;
+            }
+            let Some(entry) = patches.index_of(tie.prev.left) else {
+                continue;
+            };
+            let now = stereo_depth(&self.cfg, &self.window, tie.cur.left, tie.cur.right);
+            let scale = anchor_scale(patches.anchor_depth(entry), now);
+            if !template_at_scale(patches, entry, scale, &mut tpl) {
+                continue;
+            }
+            let Ok(found) = correlate(&tpl, h, left, tie.cur.left, (rad, rad), rcfg.min_ncc) else {
+                continue;
+            };
+            let (l, _) = recentre(&tpl, h, left, found, (1, 1), rcfg.min_ncc);
+            let Ok((r, _)) = refine_checked(left, right, l, tie.cur.right, &rcfg) else {
+                continue;
+            };
+            self.refined[n] = Refined {
+                slot: tie.slot,
+                entry: entry as u32,
+                left: l,
+                right: r,
+            };
+            n += 1;
+        }
+        self.n_refined = n;
+        for r in self.refined[..n].iter() {
+            self.matcher.refine_tie_point(r.slot, r.left, r.right);
+        }
+    }
+
+    /// Renews the templates the next epoch's tie points will start from (`epoch` is
+    /// this image's window epoch): the tie points found with a template carry it on
+    /// while their scale allows (see `patches`); the other tie points, those found by
+    /// area and the other stereo matches' left keypoints get a new template, in that
+    /// order of priority.
+    pub(super) fn store_patches(&mut self, fill: usize, left: &ImageView, epoch: Option<u32>) {
+        let Some(patches) = &mut self.patches else {
+            return;
+        };
+        patches.begin(epoch);
+        if epoch.is_none() {
+            return;
+        }
+        let limit = self.cfg.max_anchor_scale;
+        let (cfg, window) = (&self.cfg, &self.window);
+        let carry = |patches: &Patches, entry: usize, at: ([f32; 2], [f32; 2])| {
+            let now = stereo_depth(cfg, window, at.0, at.1);
+            let s = anchor_scale(patches.anchor_depth(entry), now);
+            // A receding point would need a template larger than the anchor's.
+            s <= limit && s >= 1.0 - SAME_SCALE
+        };
+        // The tie points' templates: first every carried one (their slots must not be
+        // overwritten), then the new ones.
+        for r in self.refined[..self.n_refined].iter() {
+            let entry = r.entry as usize;
+            let Some(tie) = self.matcher.tie_points().find(|t| t.slot == r.slot) else {
+                continue;
+            };
+            if tie.cur.left != r.left || !carry(patches, entry, (r.left, r.right)) {
+                continue;
+            }
+            let info = tie_info(self.track_points, window, &tie);
+            patches.keep(entry, tie.cur.left, info);
+        }
+        for a in self.area[..self.n_area]
+            .iter()
+            .filter(|a| a.point != patches::NO_ID)
+        {
+            if carry(patches, a.entry as usize, (a.left, a.right)) {
+                patches.keep(a.entry as usize, a.left, a.into());
+            }
+        }
+        for tie in self.matcher.tie_points() {
+            if patches.index_of(tie.cur.left).is_some() {
+                continue;
+            }
+            let info = tie_info(self.track_points, window, &tie);
+            let depth = stereo_depth(cfg, window, tie.cur.left, tie.cur.right);
+            patches.push(left, tie.cur.left, info, depth);
+        }
+        for a in self.area[..self.n_area]
+            .iter()
+            .filter(|a| a.point != patches::NO_ID)
+        {
+            if patches.index_of(a.left).is_none() {
+                let depth = stereo_depth(cfg, window, a.left, a.right);
+                patches.push(left, a.left, a.into(), depth);
+            }
+        }
+        let quads = self.matcher.quads();
+        let kps = self.features[fill][0].keypoints();
+        for m in self.matcher.stereo_matches(kps) {
+            if !quads.iter().any(|q| q.cur_left == m.left) {
+                let depth = stereo_depth(cfg, window, m.left_px, m.right_px);
+                patches.push(left, m.left_px, PatchInfo::stereo(m.right_px), depth);
+            }
+        }
+    }
+}
+
+/// What a tie point's template shows: its window point when its track has one.
+fn tie_info(map: &[TrackPoint], window: &Window, tie: &TiePoint) -> PatchInfo {
+    match known_point(map, window, tie) {
+        Some(point) => PatchInfo {
+            right: tie.cur.right,
+            tag: tie.track_id,
+            point,
+        },
+        None => PatchInfo::stereo(tie.cur.right),
+    }
+}
+
+/// Whether a tie point's track had a window point that the window has since freed.
+pub(super) fn has_dead_point(map: &[TrackPoint], window: &Window, tie: &TiePoint) -> bool {
+    map.get(tie.slot as usize).is_some_and(|e| {
+        e.track_id == tie.track_id
+            && e.point != u32::MAX
+            && window.point_tag(e.point) != Some(tie.track_id)
+    })
+}
+
+pub(super) fn same_spot(a: [f32; 2], b: [f32; 2]) -> bool {
+    (a[0] - b[0]).abs() < SAME_SPOT_PX && (a[1] - b[1]).abs() < SAME_SPOT_PX
+}
+
+/// Depth (metres, along the left camera's axis) of a stereo observation, from the
+/// rig as last adjusted; `None` when the rays barely intersect (a far point).
+fn stereo_depth(
+    cfg: &TraverseConfig,
+    window: &Window,
+    left: [f32; 2],
+    right: [f32; 2],
+) -> Option<f32> {
+    let d = cfg.datum;
+    let poses = [d, camera_pose(&d, &window.rig(), Camera::Right)];
+    let x = intersect_pair(cfg, &poses, left, right)?;
+    Some(-d.to_camera(&x)[2] as f32)
+}
+
+/// How many times larger a point appears now than at its template's anchor epoch,
+/// from the two depths; 1 when either is unknown (a far point).
+fn anchor_scale(anchor: Option<f32>, now: Option<f32>) -> f32 {
+    match (anchor, now) {
+        (Some(a), Some(n)) if n > 0.0 => a / n,
+        _ => 1.0,
+    }
+}
+
+/// Template `entry` of the store as it appears `scale` times larger into `out`;
+/// false when there is no such template or it would have to shrink.
+pub(super) fn template_at_scale(
+    patches: &Patches,
+    entry: usize,
+    scale: f32,
+    out: &mut [f32; TEMPLATE_LEN],
+) -> bool {
+    let mut anchor = [0f32; TEMPLATE_LEN];
+    if !patches.template(entry, &mut anchor) {
+        return false;
+    }
+    if (scale - 1.0).abs() < SAME_SCALE {
+        *out = anchor;
+        return true;
+    }
+    magnify_template(&anchor, patches.half(), scale, out)
+}

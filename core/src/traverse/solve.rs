@@ -1,0 +1,372 @@
+//! The epoch in the adjustment: its tie points as observations (new points by
+//! intersection), the window's solution, the slide, and the calibration check.
+use super::*;
+
+impl Traverse<'_> {
+    /// Initial values, window update and adjustment; true when the epoch was adjusted.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn adjust_epoch(
+        &mut self,
+        k: u32,
+        (time_s, aux): (f64, AuxObservations),
+        prediction: &Pose,
+        (left, right): (&ImageView, &ImageView),
+        out: &mut EpochOutput,
+        clock: &impl Clock,
+        t_start: u64,
+    ) -> bool {
+        let first = self.window.n_epochs() == 0 && self.history[1].is_none();
+        let dropped_before = self.window.dropped();
+        let mut resected = if first { None } else { self.resect() };
+        if !first && resected.is_none() {
+            resected = self.relocalize();
+            if resected.is_some() {
+                out.flags |= flags::RELOCALIZED;
+            }
+        }
+        // Without a resection the prediction stands, its rotation corrected from the
+        // temporal matches when they tell it; an epoch flagged below is tied to it.
+        let mut guess = *prediction;
+        if !first && resected.is_none() {
+            out.flags |= flags::NO_RESECTION;
+            if let Some(pose) = self.rotation_from_matches(prediction) {
+                out.flags |= flags::ROTATION_FROM_MATCHES;
+                guess = pose;
+            }
+        }
+        let initial = match resected {
+            Some(pose) => pose,
+            None if first => self.cfg.datum,
+            None => guess,
+        };
+        let ta = clock.now_us();
+        self.track_by_area(left, right, (&initial, resected.is_some()));
+        let area_us = elapsed(ta, clock.now_us());
+        out.times.matching_us = out.times.matching_us.saturating_add(area_us);
+        out.tie_points += self.n_area as u32;
+        if self.window.n_epochs() >= self.cfg.adjust.window && self.slide().is_err() {
+            out.flags |= flags::SOLVE_FAILED;
+            return false;
+        }
+        let Ok(id) = self.window.add_epoch(&initial, time_s) else {
+            out.flags |= flags::SOLVE_FAILED;
+            return false;
+        };
+        self.window_inputs[self.window.n_epochs() - 1] = k;
+        // Invalid auxiliary values (NaN, sigma <= 0) are refused by the window and ignored.
+        let count = aux.odometer.map(|(d, s)| (d, s * s));
+        if let (Some((d0, v0)), Some((d1, v1))) = (self.odometer_count, count) {
+            let _ = self.window.set_odometer(id, d1 - d0, libm::sqrt(v1 - v0));
+        }
+        self.odometer_count = count;
+        if let Some(g) = aux.gnss {
+            let _ = self
+                .window
+                .set_gnss_antenna(id, g.position_m, g.sigma_m, g.lever_arm_m);
+        }
+        if !first && (out.tie_points as usize) < self.cfg.min_tie_points {
+            out.flags |= flags::FEW_TIE_POINTS;
+            // Continuity from the motion prediction; errors here only mean a NaN pose.
+            let _ = self
+                .window
+                .set_pose_prior(id, &guess, self.cfg.prediction_sigmas);
+        }
+        out.new_points = self.add_tie_points(id);
+        let t3 = clock.now_us();
+        out.times.initial_us = elapsed(t_start, t3).saturating_sub(area_us);
+        out.left = initial;
+        out.right = self.right_of(&initial);
+        let adjusted = first || self.solve(id, prediction, out);
+        if adjusted {
+            out.step_m = self.step_from_previous(k);
+        }
+        out.times.adjust_us = elapsed(t3, clock.now_us());
+        self.prev_window_epoch = Some(id);
+        // The window counts its refusals since the start: this epoch's are the increase.
+        let (dp, dobs) = self.window.dropped();
+        out.dropped = (dp + dobs - dropped_before.0 - dropped_before.1) as u32;
+        if out.dropped > 0 {
+            out.flags |= flags::CAPACITY;
+        }
+        out.observations = self.window.observations().len() as u32;
+        out.points = self.window_points().count() as u32;
+        adjusted
+    }
+
+    /// The newest window epoch's centre minus the previous one's, when that is input
+    /// epoch `k - 1`: a step between epochs of one adjustment.
+    fn step_from_previous(&self, k: u32) -> Option<[f64; 3]> {
+        let n = self.window.n_epochs();
+        if n < 2 || self.window_inputs[n - 2] != k.wrapping_sub(1) {
+            return None;
+        }
+        let (a, b) = (
+            self.window.epoch_pose(n - 2)?,
+            self.window.epoch_pose(n - 1)?,
+        );
+        Some([0, 1, 2].map(|i| b.centre[i] - a.centre[i]))
+    }
+
+    /// Drops the oldest window epoch (its pose is final) and keeps the slot map in step.
+    fn slide(&mut self) -> Result<Pose, AdjustError> {
+        let pose = self.window.slide()?;
+        let n = self.window.n_epochs();
+        self.window_inputs.copy_within(1..=n, 0);
+        Ok(pose)
+    }
+
+    /// Adds the epoch's tie points: observations of known points, new points by
+    /// intersection from the previous epoch. Returns the number of new points.
+    fn add_tie_points(&mut self, id: u32) -> u32 {
+        let Some(prev_id) = self.prev_window_epoch else {
+            return 0;
+        };
+        let Some(prev_slot) = self.window.n_epochs().checked_sub(2) else {
+            return 0;
+        };
+        let Some(prev_left) = self.window.epoch_pose(prev_slot) else {
+            return 0;
+        };
+        let prev = [prev_left, self.right_of(&prev_left)];
+        let mut new_points = 0;
+        for (k, tie) in self.matcher.tie_points().enumerate() {
+            // Two tracks whose templates led to one spot observe one image point: the
+            // later one is left out (two window points on one observation would both
+            // take it, and their right observations would contradict each other).
+            let twin = self
+                .matcher
+                .tie_points()
+                .take(k)
+                .any(|t| same_spot(t.cur.left, tie.cur.left));
+            if twin {
+                continue;
+            }
+            // A track whose point left the window keeps its identity but gets no new
+            // point: one track, one point, as the reports key points by track.
+            if has_dead_point(self.track_points, &self.window, &tie) {
+                continue;
+            }
+            let point = match known_point(self.track_points, &self.window, &tie) {
+                Some(p) => p,
+                None => {
+                    let at = (prev_id, &prev);
+                    let obs = (tie.prev.left, tie.prev.right);
+                    let Some(p) = new_point(&self.cfg, &mut self.window, at, obs, tie.track_id)
+                    else {
+                        continue;
+                    };
+                    if let Some(e) = self.track_points.get_mut(tie.slot as usize) {
+                        *e = TrackPoint {
+                            track_id: tie.track_id,
+                            point: p,
+                        };
+                    }
+                    new_points += 1;
+                    p
+                }
+            };
+            let obs = (tie.cur.left, tie.cur.right);
+            add_stereo_observations(&self.cfg, &mut self.window, id, point, obs, tie.track_id);
+        }
+        new_points + self.add_area_ties(id, (prev_id, &prev))
+    }
+
+    /// Adjusts the window; on failure ties the new epoch to its prediction and tries once more.
+    fn solve(&mut self, id: u32, prediction: &Pose, out: &mut EpochOutput) -> bool {
+        let mut result = self.window.solve();
+        if let Err(e) = result {
+            self.last_solve_error = Some(e);
+            out.flags |= flags::SOLVE_FAILED;
+            let _ = self
+                .window
+                .set_pose_prior(id, prediction, self.cfg.prediction_sigmas);
+            result = self.window.solve();
+        }
+        let Ok(mut rep) = result else { return false };
+        // A correction is one Gauss-Newton step of the freed calibration: repeated on
+        // the re-adjusted window until the test accepts it.
+        let mut steps = 0;
+        while steps < config::CALIBRATION_STEPS && self.check_calibration(rep.sigma0, steps > 0) {
+            steps += 1;
+            out.flags |= flags::CALIBRATION_CORRECTED;
+            match self.window.solve() {
+                Ok(r) => rep = r,
+                Err(e) => {
+                    self.last_solve_error = Some(e);
+                    out.flags |= flags::SOLVE_FAILED;
+                    return false;
+                }
+            }
+        }
+        let last = self.window.n_epochs() - 1;
+        if let Some(pose) = self.window.epoch_pose(last) {
+            out.left = pose;
+            out.right = self.right_of(&pose);
+        }
+        out.std = self.window.epoch_absolute_std(last);
+        out.relative_std_m = self
+            .window
+            .epoch_relative_std(last)
+            .map(|s| [s[3], s[4], s[5]]);
+        out.sigma0 = rep.sigma0;
+        out.chi2_passed = rep.chi2.passed;
+        out.redundancy = rep.redundancy as u32;
+        out.iterations = rep.iterations as u32;
+        out.flagged_observations = rep.flagged as u32;
+        out.rms_px = self.rms_px();
+        // Only the upper tail flags: sigma0 above its bound means blunders or a model
+        // error; below it, the a-priori sigma was merely pessimistic.
+        if rep.chi2.statistic > rep.chi2.upper {
+            out.flags |= flags::CHI2;
+        }
+        true
+    }
+
+    /// The calibration check ([`config::CalibrationCheck`]) after an adjustment whose
+    /// a-posteriori sigma is `sigma0`: corrects the held calibration when the score
+    /// test rejects it and the correction matters (returns true: the window must be
+    /// adjusted again), and holds it as it is for good after `epochs` epochs.
+    /// `again`: the calibration was just corrected at this epoch; a rejection now
+    /// continues that correction without waiting for `persistence`.
+    fn check_calibration(&mut self, sigma0: f64, again: bool) -> bool {
+        let Some(check) = self.cfg.calibration_check else {
+            return false;
+        };
+        if !self.window.calibration_active() {
+            return false;
+        }
+        // A test that cannot be computed (a singular system) corrects nothing. The
+        // floor keeps noise-free data (sigma0 near zero) from magnifying rounding
+        // into a rejection; real matching stays well above it (0.17 to 0.35 on the
+        // rendered streets).
+        let sigma0 = sigma0.max(config::CALIBRATION_TEST_MIN_SIGMA0);
+        if let Ok(test) = self.window.calibration_test(sigma0) {
+            let critical = chi2_quantile(1.0 - check.level, test.dof as f64);
+            let px = self.cfg.rig.right.pixel_size_mm[0];
+            let rejected = test.statistic > critical
+                && self.window.correction_effect(&test) > check.min_effect_px * px;
+            self.calibration_rejections = if rejected {
+                self.calibration_rejections + 1
+            } else {
+                0
+            };
+            if self.calibration_rejections >= check.persistence || (again && rejected) {
+                self.window.correct_calibration(&test);
+                self.calibration_corrections += 1;
+                self.calibration_rejections = 0;
+                return true;
+            }
+        }
+        if self.epochs >= check.epochs && !again {
+            self.window.drop_calibration();
+        }
+        false
+    }
+
+    /// RMS image residual of the window's unflagged observations, pixels.
+    fn rms_px(&self) -> f64 {
+        let px = self.cfg.rig.left.pixel_size_mm;
+        let (mut sum, mut n) = (0.0, 0usize);
+        let residuals = self.window.residuals();
+        for (o, r) in self.window.observations().iter().zip(residuals) {
+            if o.is_flagged() {
+                continue;
+            }
+            if let Some([vx, vy]) = r {
+                sum += (vx / px[0]) * (vx / px[0]) + (vy / px[1]) * (vy / px[1]);
+                n += 1;
+            }
+        }
+        if n == 0 {
+            0.0
+        } else {
+            libm::sqrt(sum / n as f64)
+        }
+    }
+}
+
+/// The window point of a tie point's track, if the track already has one and the
+/// window still holds it (a freed point's slot may hold another track's point).
+pub(super) fn known_point(map: &[TrackPoint], window: &Window, tie: &TiePoint) -> Option<u32> {
+    let e = map.get(tie.slot as usize)?;
+    (e.track_id == tie.track_id && e.point != u32::MAX)
+        .then_some(e.point)
+        .filter(|&p| window.point_tag(p) == Some(tie.track_id))
+}
+
+/// An image observation of `point` at pixel `px`, weighted by the configured sigma.
+fn observation(
+    cfg: &TraverseConfig,
+    epoch: u32,
+    camera: Camera,
+    point: u32,
+    px: [f32; 2],
+    tag: u32,
+) -> Observation {
+    let interior = match camera {
+        Camera::Left => &cfg.rig.left,
+        Camera::Right => &cfg.rig.right,
+    };
+    let xy = interior.pixel_to_corrected(px[0] as f64, px[1] as f64);
+    let s = cfg.sigma_px;
+    let [sx, sy] = interior.pixel_size_mm;
+    let weight = [1.0 / (s * sx * s * sx), 1.0 / (s * sy * s * sy)];
+    let mut o = Observation::new(epoch, camera, point, xy, weight);
+    o.tag = tag;
+    o
+}
+
+/// Observations of `point` in both images of window epoch `id`.
+pub(super) fn add_stereo_observations(
+    cfg: &TraverseConfig,
+    window: &mut Window,
+    id: u32,
+    point: u32,
+    (left, right): ([f32; 2], [f32; 2]),
+    tag: u32,
+) {
+    for (cam, px) in [(Camera::Left, left), (Camera::Right, right)] {
+        let _ = window.add_observation(observation(cfg, id, cam, point, px, tag));
+    }
+}
+
+/// Intersects a point from a stereo observation (`left` and `right` pixels) of the
+/// epoch with left and right poses `poses`; `None` when the rays barely intersect or
+/// the point is behind the camera or beyond `max_depth_m`.
+pub(super) fn intersect_pair(
+    cfg: &TraverseConfig,
+    poses: &[Pose; 2],
+    left: [f32; 2],
+    right: [f32; 2],
+) -> Option<[f64; 3]> {
+    let rig = &cfg.rig;
+    let ray = |pose: &Pose, interior: &crate::camera::Interior, px: [f32; 2]| Ray {
+        pose: *pose,
+        focal_mm: interior.focal_mm,
+        xy: interior.pixel_to_corrected(px[0] as f64, px[1] as f64),
+    };
+    let rays = [
+        ray(&poses[0], &rig.left, left),
+        ray(&poses[1], &rig.right, right),
+    ];
+    let x = intersect(&rays, cfg.min_ray_angle_rad).ok()?;
+    let depth = -poses[0].to_camera(&x.point)[2];
+    (depth > 0.0 && depth <= cfg.max_depth_m).then_some(x.point)
+}
+
+/// Intersects a new tie point from its stereo observation `obs` at the previous epoch
+/// (`at`: its window epoch id and its left and right poses) and adds it with those two
+/// observations, tagged `tag`.
+pub(super) fn new_point(
+    cfg: &TraverseConfig,
+    window: &mut Window,
+    at: (u32, &[Pose; 2]),
+    obs: ([f32; 2], [f32; 2]),
+    tag: u32,
+) -> Option<u32> {
+    let (prev_id, poses) = at;
+    let xyz = intersect_pair(cfg, poses, obs.0, obs.1)?;
+    let point = window.add_point(xyz).ok()?;
+    add_stereo_observations(cfg, window, prev_id, point, obs, tag);
+    Some(point)
+}
