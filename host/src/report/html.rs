@@ -598,16 +598,19 @@ fn html_escape(s: &str) -> String {
 
 /// Writes `report.html` for `report` at `path`.
 pub fn write_html(path: &Path, report: &RunReport) -> Result<()> {
-    let mut trajectory = vec![Series {
-        name: "estimate (left camera)".into(),
-        points: report.epochs.iter().map(|e| (e.left.x, e.left.y)).collect(),
-    }];
-    if let Some(gt) = &report.ground_truth {
-        trajectory.push(Series {
+    // The truth first, under the estimate: where the two meet the estimate stays visible.
+    let mut trajectory: Vec<Series> = report
+        .ground_truth
+        .iter()
+        .map(|gt| Series {
             name: "ground truth".into(),
             points: gt.iter().map(|p| (p[0], p[1])).collect(),
-        });
-    }
+        })
+        .collect();
+    trajectory.push(Series {
+        name: "estimate (left camera)".into(),
+        points: report.epochs.iter().map(|e| (e.left.x, e.left.y)).collect(),
+    });
     let mut sections = vec![(
         "Trajectory seen from above",
         line_chart("Trajectory (top view)", "X (m)", "Y (m)", &trajectory, true)?,
@@ -828,6 +831,14 @@ mod tests {
             assert!(page.contains(title), "{title} missing");
         }
         assert!(page.contains("straight &lt;synthetic&gt;"));
+        // The trajectory draws the truth first, under the estimate.
+        let top_view = &page[page.find("Trajectory (top view)").unwrap()..];
+        let top_view = &top_view[..top_view.find("</svg>").unwrap()];
+        let (truth, estimate) = (
+            top_view.find("ground truth").unwrap(),
+            top_view.find("estimate (left camera)").unwrap(),
+        );
+        assert!(truth < estimate, "the estimate is drawn under the truth");
         assert!(page.contains("<td>window_points</td><td>252</td><td>177</td>"));
         assert!(!page.contains("On the microcontroller"));
 
