@@ -150,6 +150,23 @@ pub fn build_image(part: &Part, sizes: &StorageSizes) -> Result<PathBuf> {
     Ok(target_dir.join(RUST_TARGET).join("release").join(IMAGE_BIN))
 }
 
+/// An image built for a part, with the storage sizes it was linked with.
+#[derive(Debug, Clone)]
+pub struct TargetImage {
+    pub part: Part,
+    pub path: PathBuf,
+    pub sizes: StorageSizes,
+}
+
+impl TargetImage {
+    /// Builds the image for `part` with the storage `configure` needs.
+    pub fn build(part: Part, configure: &Configure) -> Result<Self> {
+        let sizes = StorageSizes::for_configuration(configure)?;
+        let path = build_image(&part, &sizes)?;
+        Ok(TargetImage { part, path, sizes })
+    }
+}
+
 /// What a failed image build means, from cargo's output.
 fn build_failure(part: &Part, sizes: &StorageSizes, stderr: &str) -> String {
     let overflow: Vec<&str> = stderr
@@ -191,10 +208,19 @@ pub struct Section {
     pub bytes: u64,
 }
 
-/// The allocated sections of an ELF image (code, constants, statics, the arena and
-/// the frames), in address order.
-pub fn elf_sections(image: &Path) -> Result<Vec<Section>> {
-    use object::{Object, ObjectSection, SectionFlags};
+/// What the linked ELF says: its allocated sections (code, constants, statics, the
+/// arena and the frames) in address order, and the bytes left for the stack.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ElfFigures {
+    pub sections: Vec<Section>,
+    /// From the end of the statics in RAM to the top of the stack (cortex-m-rt's
+    /// `__euninit` and `_stack_start`).
+    pub stack_reserved_bytes: u64,
+}
+
+/// Reads and parses the image once for all its figures.
+pub fn read_elf(image: &Path) -> Result<ElfFigures> {
+    use object::{Object, ObjectSection, ObjectSymbol, SectionFlags};
     let data = std::fs::read(image)
         .with_context(|| format!("cannot read the image {}", image.display()))?;
     let file = object::File::parse(&*data)
@@ -215,24 +241,17 @@ pub fn elf_sections(image: &Path) -> Result<Vec<Section>> {
         })
         .collect();
     sections.sort_by_key(|s| s.address);
-    Ok(sections)
-}
-
-/// Bytes between the end of the statics in RAM and the top of the stack: what the stack
-/// may use (cortex-m-rt's `__euninit` and `_stack_start`).
-pub fn stack_reserved(image: &Path) -> Result<u64> {
-    use object::{Object, ObjectSymbol};
-    let data = std::fs::read(image)
-        .with_context(|| format!("cannot read the image {}", image.display()))?;
-    let file = object::File::parse(&*data)
-        .with_context(|| format!("{} is not an ELF image", image.display()))?;
     let symbol = |name: &str| {
         file.symbols()
             .find(|s| s.name() == Ok(name))
             .map(|s| s.address())
             .with_context(|| format!("{} has no symbol {name}", image.display()))
     };
-    Ok(symbol("_stack_start")?.saturating_sub(symbol("__euninit")?))
+    let stack_reserved_bytes = symbol("_stack_start")?.saturating_sub(symbol("__euninit")?);
+    Ok(ElfFigures {
+        sections,
+        stack_reserved_bytes,
+    })
 }
 
 /// Bytes of the named section, 0 when the image has none.
@@ -305,12 +324,12 @@ const PROCESSING: [usize; 6] = [
 /// The instruction counts of a run on the emulated core, from its per-epoch timings.
 pub fn target_time(timings_us: &[[u32; stage::COUNT]]) -> TargetTime {
     let insns = |t: &[u32; stage::COUNT], s: usize| t[s] as f64 * INSTRUCTIONS_PER_US;
-    let per_epoch: Vec<f64> = timings_us
+    let mut per_epoch: Vec<f64> = timings_us
         .iter()
         .map(|t| PROCESSING.iter().map(|&s| insns(t, s)).sum())
         .collect();
-    let epoch_median = median(&mut per_epoch.clone());
     let epoch_max = per_epoch.iter().copied().fold(0.0, f64::max);
+    let epoch_median = median(&mut per_epoch);
     let stages = PROCESSING
         .iter()
         .map(|&s| {
@@ -369,21 +388,20 @@ pub struct StackReport {
 }
 
 impl TargetReport {
-    /// The report of a run of `image` on `part`, from the firmware's statistics.
+    /// The report of a run of `image`, from the firmware's statistics.
     pub fn new(
-        part: &Part,
-        image: &Path,
-        predicted: StorageSizes,
+        image: &TargetImage,
         stats: &[phototraverse_core::protocol::messages::Stats],
     ) -> Result<Self> {
         let timings: Vec<_> = stats.iter().map(|s| s.timings_us).collect();
+        let part = &image.part;
         Ok(TargetReport {
             part: part.name.into(),
             description: part.description.into(),
             qemu_machine: part.qemu_machine.map(Into::into),
-            image: image.display().to_string(),
-            sections: elf_sections(image)?,
-            predicted,
+            image: image.path.display().to_string(),
+            sections: read_elf(&image.path)?.sections,
+            predicted: image.sizes,
             stack: stats
                 .iter()
                 .rev()

@@ -11,7 +11,7 @@
 use crate::dataset::{aiding, Dataset};
 use crate::eval::{evaluate, Evaluation};
 use crate::link::LinkOptions;
-use crate::mcu::{Part, StorageSizes, TargetReport};
+use crate::mcu::{TargetImage, TargetReport};
 use crate::pipeline::PipelineSettings;
 use crate::poses::{format_pose, KittiPose};
 use crate::report::colmap;
@@ -32,7 +32,7 @@ use phototraverse_core::protocol::messages::{
 use phototraverse_core::traverse::motion::constant_velocity;
 use phototraverse_firmware_sim::{configuration_budget, TraverseFactory};
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// How to run.
 #[derive(Debug, Clone)]
@@ -69,7 +69,7 @@ pub fn run_dataset(ds: &Dataset, out: &Path, opts: &RunOptions) -> Result<RunOut
     let image = opts.link.target_image(&configure)?;
     let transport = opts
         .link
-        .open_with_image(image.clone())
+        .open_with_image(image.as_ref())
         .context("cannot open the link to the firmware")?;
     let mut session = Session::open(transport, SessionOptions::from_link(&opts.link))
         .context("the firmware did not answer the hello")?;
@@ -155,7 +155,7 @@ struct Run<'d> {
     /// Tie points and observations reported by the firmware.
     ties: TieCollector,
     /// The part and image of a run on an emulated microcontroller.
-    target_image: Option<(Part, PathBuf)>,
+    target_image: Option<TargetImage>,
 }
 
 impl<'d> Run<'d> {
@@ -502,17 +502,9 @@ impl<'d> Run<'d> {
         let last_stats = last.and_then(|l| session.stats(l as u32));
         self.report.memory = self.memory_lines(last_stats.map(|s| s.memory_high_water));
         self.report.capacities = last_stats.map(capacity_lines).unwrap_or_default();
-        if let Some((part, image)) = &self.target_image {
-            let configure =
-                self.settings
-                    .configure_for(&self.ds.rig, &self.ds.datum, &self.ds.precision);
+        if let Some(image) = &self.target_image {
             let stats: Vec<_> = session.all_stats().copied().collect();
-            self.report.target = Some(TargetReport::new(
-                part,
-                image,
-                StorageSizes::for_configuration(&configure)?,
-                &stats,
-            )?);
+            self.report.target = Some(TargetReport::new(image, &stats)?);
         }
         self.smooth()?;
         for (e, v) in velocities(&self.report.epochs).into_iter().enumerate() {

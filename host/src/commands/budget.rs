@@ -1,8 +1,5 @@
 //! `phototraverse budget`: the firmware's memory for a configuration and image size.
-use crate::mcu::{
-    build_image, elf_sections, section_bytes, stack_reserved, Part, Section, StorageSizes,
-    TargetReport,
-};
+use crate::mcu::{read_elf, section_bytes, Part, Section, StorageSizes, TargetImage, TargetReport};
 use crate::pipeline::PipelineSettings;
 use crate::report::{CapacityLine, RunReport};
 use anyhow::{Context, Result};
@@ -192,15 +189,15 @@ fn link_image(part: &str, args: &Args) -> Result<ImageFit> {
     let part = Part::named(part)?;
     let settings = PipelineSettings::load(args.config.as_deref())?;
     let configure = settings.configure(&rig_of_size(args.width, args.height));
-    let sizes = StorageSizes::for_configuration(&configure)?;
-    let image = build_image(&part, &sizes)?;
+    let image = TargetImage::build(part, &configure)?;
+    let elf = read_elf(&image.path)?;
     Ok(ImageFit {
         part: part.name.into(),
-        image: image.display().to_string(),
-        predicted: sizes,
+        image: image.path.display().to_string(),
+        predicted: image.sizes,
         predicted_link_bytes: LinkBuffers::BYTES,
-        sections: elf_sections(&image)?,
-        stack_reserved_bytes: stack_reserved(&image)?,
+        sections: elf.sections,
+        stack_reserved_bytes: elf.stack_reserved_bytes,
     })
 }
 

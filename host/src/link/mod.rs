@@ -170,14 +170,12 @@ impl LinkOptions {
     pub fn target_image(
         &self,
         configure: &phototraverse_core::protocol::messages::Configure,
-    ) -> anyhow::Result<Option<(crate::mcu::Part, std::path::PathBuf)>> {
+    ) -> anyhow::Result<Option<crate::mcu::TargetImage>> {
         let LinkKind::Qemu(machine) = &self.link else {
             return Ok(None);
         };
         let part = crate::mcu::Part::for_qemu_machine(machine)?;
-        let sizes = crate::mcu::StorageSizes::for_configuration(configure)?;
-        let image = crate::mcu::build_image(&part, &sizes)?;
-        Ok(Some((part, image)))
+        crate::mcu::TargetImage::build(part, configure).map(Some)
     }
 
     /// Opens the transport with its limiter and injector.
@@ -188,7 +186,7 @@ impl LinkOptions {
     /// Opens the transport; a QEMU link runs `image` ([`LinkOptions::target_image`]).
     pub fn open_with_image(
         &self,
-        image: Option<(crate::mcu::Part, std::path::PathBuf)>,
+        image: Option<&crate::mcu::TargetImage>,
     ) -> anyhow::Result<Box<dyn Transport>> {
         for (name, p) in [
             ("--fault-ber", self.fault_ber),
@@ -219,13 +217,13 @@ impl LinkOptions {
                 net::SerialLink::open(dev, self.baud.unwrap_or(921_600)).context("serial link")?,
             ),
             LinkKind::Qemu(machine) => {
-                let Some((part, image)) = image else {
+                let Some(image) = image else {
                     bail!(
                         "the QEMU link ({machine}) runs an image built for the run's \
                          configuration: use it with `run` or `demo`"
                     );
                 };
-                Box::new(qemu::QemuLink::spawn(part, image)?)
+                Box::new(qemu::QemuLink::spawn(image)?)
             }
         };
         let limited: Box<dyn Transport> = match self.baud {

@@ -4,9 +4,9 @@
 //! ([`crate::mcu::build_image`]).
 use super::child::ChildGuard;
 use super::transport::{StreamTransport, Transport};
-use crate::mcu::Part;
+use crate::mcu::TargetImage;
 use anyhow::{bail, Context};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
@@ -43,17 +43,16 @@ pub fn qemu_command(machine: &str, image: &Path) -> Command {
 pub struct QemuLink {
     inner: StreamTransport,
     _qemu: ChildGuard,
-    pub image: PathBuf,
-    pub part: Part,
 }
 
 impl QemuLink {
-    /// Starts QEMU's `part` machine on `image`.
-    pub fn spawn(part: Part, image: PathBuf) -> anyhow::Result<Self> {
-        let Some(machine) = part.qemu_machine else {
-            bail!("the part {} has no QEMU machine to run on", part.name);
+    /// Starts the machine of the image's part on the image.
+    pub fn spawn(image: &TargetImage) -> anyhow::Result<Self> {
+        let Some(machine) = image.part.qemu_machine else {
+            bail!("the part {} has no QEMU machine to run on", image.part.name);
         };
-        let mut cmd = qemu_command(machine, &image);
+        let image = &image.path;
+        let mut cmd = qemu_command(machine, image);
         // Its own process group: Ctrl-C goes to the host, which finishes the epochs in flight.
         #[cfg(unix)]
         std::os::unix::process::CommandExt::process_group(&mut cmd, 0);
@@ -76,8 +75,6 @@ impl QemuLink {
         Ok(QemuLink {
             inner: StreamTransport::spawn(stdin, stdout, "qemu", name),
             _qemu: ChildGuard(child),
-            image,
-            part,
         })
     }
 }
