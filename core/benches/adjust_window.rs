@@ -12,7 +12,7 @@
 use phototraverse_core::adjust::geometry::{project_rig, Camera, RigParams};
 use phototraverse_core::adjust::{AdjustConfig, Observation, Robust, Window};
 use phototraverse_core::budget::{Arena, MemoryBudget};
-use phototraverse_core::camera::{Interior, Pose, Rig};
+use phototraverse_core::camera::{DistortionModel, Interior, Pose, Rig};
 use std::fmt::Write as _;
 use std::time::Instant;
 
@@ -51,8 +51,9 @@ fn rig() -> Rig {
         pixel_size_mm: [PIXEL_MM, PIXEL_MM],
         focal_mm: FOCAL,
         principal_point_mm: [0.0, 0.0],
-        radial: [0.0, 0.0],
+        radial: [0.0, 0.0, 0.0],
         decentering: [0.0, 0.0],
+        distortion_model: DistortionModel::Correction,
     };
     let mut rig = Rig::rectified(cam, 0.5);
     rig.relative_angles = [0.002, -0.004, 0.001];

@@ -3,8 +3,10 @@
 //! collinearity", "Stereo rig", "KITTI output").
 //!
 //! - Photo-coordinates in mm, origin at the image centre, x right, y up.
-//! - Interior orientation: focal length, principal point, radial (k1, k2) and
-//!   decentering (p1, p2) distortion as a *correction of measured coordinates*.
+//! - Interior orientation: focal length, principal point, radial (k1, k2, k3) and
+//!   decentering (p1, p2) distortion, by default as a *correction of measured
+//!   coordinates*; [`DistortionModel::Projection`] holds calibrations made the other
+//!   way round (OpenCV, Kalibr `radtan`) exactly.
 //! - `M = Rk(kappa) Rp(phi) Rw(omega)` rotates object to camera; collinearity
 //!   `(u, v, w) = M (P - C)`, `xc = -f u / w`, `yc = -f v / w`; the camera looks
 //!   along its -z axis, so a point in front has `w < 0`.
@@ -51,6 +53,19 @@ impl core::fmt::Display for CameraError {
     }
 }
 
+/// Which way the distortion polynomials act (docs/conventions.md, "Interior
+/// orientation and distortion").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum DistortionModel {
+    /// The photogrammetric convention: the polynomials of the *measured* reduced
+    /// coordinates give their correction, `xc = xb - d(xb)`.
+    #[default]
+    Correction,
+    /// The computer-vision convention (OpenCV, Kalibr `radtan`): the polynomials of
+    /// the *ideal* coordinates give where the point is measured, `xb = xc + d(xc)`.
+    Projection,
+}
+
 /// Interior orientation and image format of one camera.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Interior {
@@ -62,10 +77,12 @@ pub struct Interior {
     pub focal_mm: f64,
     /// Principal point `[x0, y0]`, mm, in photo-coordinates.
     pub principal_point_mm: [f64; 2],
-    /// Radial distortion `[k1 (mm^-2), k2 (mm^-4)]`.
-    pub radial: [f64; 2],
+    /// Radial distortion `[k1 (mm^-2), k2 (mm^-4), k3 (mm^-6)]`.
+    pub radial: [f64; 3],
     /// Decentering distortion `[p1, p2]`, mm^-1.
     pub decentering: [f64; 2],
+    /// Which way `radial` and `decentering` act.
+    pub distortion_model: DistortionModel,
 }
 
 /// Indices of the interior parameters in [`Interior::correction_jacobian`].
@@ -76,7 +93,17 @@ pub mod io_param {
     pub const K2: usize = 3;
     pub const P1: usize = 4;
     pub const P2: usize = 5;
+    pub const K3: usize = 6;
+    /// Number of columns.
+    pub const COUNT: usize = 7;
 }
+
+/// Grid points per side on which [`Interior::validate`] checks that the distortion
+/// can be undone over the whole format.
+const FORMAT_CHECK_GRID: usize = 9;
+/// Largest disagreement, mm, between a format point and its round trip through
+/// [`Interior::correct`] and [`Interior::uncorrect`] that still counts as invertible.
+const FORMAT_CHECK_TOL_MM: f64 = 1e-9;
 
 impl Interior {
     /// An ideal pinhole in pixel units: `sx = sy = 1`, principal point at the
@@ -88,12 +115,19 @@ impl Interior {
             pixel_size_mm: [1.0, 1.0],
             focal_mm: focal_px,
             principal_point_mm: [0.0, 0.0],
-            radial: [0.0, 0.0],
+            radial: [0.0; 3],
             decentering: [0.0, 0.0],
+            distortion_model: DistortionModel::Correction,
         }
     }
 
-    /// Checks that the parameters describe a real camera.
+    /// No lens distortion: correction and its inverse are the identity.
+    pub fn is_distortion_free(&self) -> bool {
+        self.radial == [0.0; 3] && self.decentering == [0.0; 2]
+    }
+
+    /// Checks that the parameters describe a real camera, whose distortion can be
+    /// undone everywhere on its format.
     pub fn validate(&self) -> Result<(), CameraError> {
         let values = [
             self.pixel_size_mm[0],
@@ -103,6 +137,7 @@ impl Interior {
             self.principal_point_mm[1],
             self.radial[0],
             self.radial[1],
+            self.radial[2],
             self.decentering[0],
             self.decentering[1],
         ];
@@ -118,6 +153,31 @@ impl Interior {
             || self.pixel_size_mm[1] <= 0.0
         {
             return Err(CameraError::BadFormat);
+        }
+        self.check_invertible_over_format()
+    }
+
+    /// A lens whose distortion folds the format over itself (a polynomial fitted
+    /// far beyond its data) has no inverse there: every grid point of the format
+    /// must come back from the ideal coordinates to where it was measured.
+    fn check_invertible_over_format(&self) -> Result<(), CameraError> {
+        if self.is_distortion_free() {
+            return Ok(());
+        }
+        let n = FORMAT_CHECK_GRID;
+        let last = (n - 1) as f64;
+        for i in 0..n {
+            for j in 0..n {
+                let c = (self.width_px as f64 - 1.0) * i as f64 / last;
+                let r = (self.height_px as f64 - 1.0) * j as f64 / last;
+                let [x, y] = self.pixel_to_photo(c, r);
+                let [xc, yc] = self.correct(x, y);
+                let [xm, ym] = self.uncorrect(xc, yc)?;
+                if !((xm - x).abs() <= FORMAT_CHECK_TOL_MM && (ym - y).abs() <= FORMAT_CHECK_TOL_MM)
+                {
+                    return Err(CameraError::DistortionDiverged);
+                }
+            }
         }
         Ok(())
     }
@@ -147,12 +207,14 @@ impl Interior {
         ]
     }
 
-    /// Distortion `(dx, dy)` at reduced coordinates `(xb, yb)` (relative to the principal point).
+    /// The distortion polynomials `(dx, dy)` at reduced coordinates `(xb, yb)`
+    /// (relative to the principal point): measured ones for
+    /// [`DistortionModel::Correction`], ideal ones for [`DistortionModel::Projection`].
     pub fn distortion(&self, xb: f64, yb: f64) -> [f64; 2] {
-        let [k1, k2] = self.radial;
+        let [k1, k2, k3] = self.radial;
         let [p1, p2] = self.decentering;
         let r2 = xb * xb + yb * yb;
-        let radial = k1 * r2 + k2 * r2 * r2;
+        let radial = k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2;
         [
             xb * radial + p1 * (r2 + 2.0 * xb * xb) + 2.0 * p2 * xb * yb,
             yb * radial + 2.0 * p1 * xb * yb + p2 * (r2 + 2.0 * yb * yb),
@@ -161,11 +223,11 @@ impl Interior {
 
     /// `d(dx, dy) / d(xb, yb)`, row-major.
     fn distortion_jacobian(&self, xb: f64, yb: f64) -> [[f64; 2]; 2] {
-        let [k1, k2] = self.radial;
+        let [k1, k2, k3] = self.radial;
         let [p1, p2] = self.decentering;
         let r2 = xb * xb + yb * yb;
-        let radial = k1 * r2 + k2 * r2 * r2;
-        let dradial = 2.0 * (k1 + 2.0 * k2 * r2); // d(radial)/dxb = dradial * xb
+        let radial = k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2;
+        let dradial = 2.0 * (k1 + 2.0 * k2 * r2 + 3.0 * k3 * r2 * r2); // d(radial)/dxb = dradial * xb
         [
             [
                 radial + dradial * xb * xb + 6.0 * p1 * xb + 2.0 * p2 * yb,
@@ -180,50 +242,80 @@ impl Interior {
 
     /// Measured photo-coordinates to corrected reduced coordinates `(xc, yc)`:
     /// relative to the principal point and free of lens distortion.
+    ///
+    /// Closed form for [`DistortionModel::Correction`]. For
+    /// [`DistortionModel::Projection`] it is Newton's inverse of `xc + d(xc) = xb`,
+    /// which [`Interior::validate`] has checked converges everywhere on the format;
+    /// off the format, where it may not, the last iterate is returned, as OpenCV's
+    /// `undistortPoints` does.
     pub fn correct(&self, x: f64, y: f64) -> [f64; 2] {
         let xb = x - self.principal_point_mm[0];
         let yb = y - self.principal_point_mm[1];
-        let [dx, dy] = self.distortion(xb, yb);
-        [xb - dx, yb - dy]
+        match self.distortion_model {
+            DistortionModel::Correction => {
+                let [dx, dy] = self.distortion(xb, yb);
+                [xb - dx, yb - dy]
+            }
+            DistortionModel::Projection => match self.solve_distorted(xb, yb, 1.0) {
+                Ok(xy) | Err(Unsolved(xy)) => xy,
+            },
+        }
     }
 
     /// Inverse of [`Interior::correct`]: where a point with corrected coordinates
     /// `(xc, yc)` is measured on the photo.
     ///
-    /// Newton's method on `xb - d(xb) = xc` from `xb = xc`. Convergence: the
-    /// correction map is a contraction wherever the norm of `d(dx,dy)/d(xb,yb)`
-    /// stays below 1 (for the seed 000 lens it is below 0.02 over the whole
-    /// format), and Newton then converges quadratically; the iteration stops at
-    /// a step below [`UNDISTORT_TOL_MM`] and fails after [`UNDISTORT_MAX_ITER`]
-    /// steps or on a singular Jacobian, which happens only far outside the
-    /// calibrated format.
+    /// Closed form for [`DistortionModel::Projection`]. For
+    /// [`DistortionModel::Correction`] it is Newton's method on `xb - d(xb) = xc`
+    /// from `xb = xc`. Convergence: the correction map is a contraction wherever
+    /// the norm of `d(dx,dy)/d(xb,yb)` stays below 1 (for the seed 000 lens it is
+    /// below 0.02 over the whole format), and Newton then converges quadratically;
+    /// the iteration stops at a step below [`UNDISTORT_TOL_MM`] and fails after
+    /// [`UNDISTORT_MAX_ITER`] steps or on a singular Jacobian, which happens only
+    /// far outside the calibrated format.
     pub fn uncorrect(&self, xc: f64, yc: f64) -> Result<[f64; 2], CameraError> {
         if !(xc.is_finite() && yc.is_finite()) {
             return Err(CameraError::NotFinite);
         }
-        let (mut xb, mut yb) = (xc, yc);
+        let [xb, yb] = match self.distortion_model {
+            DistortionModel::Projection => {
+                let [dx, dy] = self.distortion(xc, yc);
+                [xc + dx, yc + dy]
+            }
+            DistortionModel::Correction => self
+                .solve_distorted(xc, yc, -1.0)
+                .map_err(|_| CameraError::DistortionDiverged)?,
+        };
+        Ok([
+            xb + self.principal_point_mm[0],
+            yb + self.principal_point_mm[1],
+        ])
+    }
+
+    /// Solves `z + sign d(z) = t` for `z` by Newton's method from `z = t`: the
+    /// inverse of whichever direction of the distortion has no closed form.
+    fn solve_distorted(&self, tx: f64, ty: f64, sign: f64) -> Result<[f64; 2], Unsolved> {
+        let (mut zx, mut zy) = (tx, ty);
         for _ in 0..UNDISTORT_MAX_ITER {
-            let [dx, dy] = self.distortion(xb, yb);
-            let fx = xb - dx - xc;
-            let fy = yb - dy - yc;
-            let j = self.distortion_jacobian(xb, yb);
-            let (a, b, c, d) = (1.0 - j[0][0], -j[0][1], -j[1][0], 1.0 - j[1][1]);
+            let [dx, dy] = self.distortion(zx, zy);
+            let fx = zx + sign * dx - tx;
+            let fy = zy + sign * dy - ty;
+            let j = self.distortion_jacobian(zx, zy);
+            let (a, b) = (1.0 + sign * j[0][0], sign * j[0][1]);
+            let (c, d) = (sign * j[1][0], 1.0 + sign * j[1][1]);
             let det = a * d - b * c;
             if det.abs() < 1e-6 || !det.is_finite() {
-                return Err(CameraError::DistortionDiverged);
+                return Err(Unsolved([zx, zy]));
             }
             let sx = (d * fx - b * fy) / det;
             let sy = (a * fy - c * fx) / det;
-            xb -= sx;
-            yb -= sy;
+            zx -= sx;
+            zy -= sy;
             if sx.abs() < UNDISTORT_TOL_MM && sy.abs() < UNDISTORT_TOL_MM {
-                return Ok([
-                    xb + self.principal_point_mm[0],
-                    yb + self.principal_point_mm[1],
-                ]);
+                return Ok([zx, zy]);
             }
         }
-        Err(CameraError::DistortionDiverged)
+        Err(Unsolved([zx, zy]))
     }
 
     /// Pixel `(c, r)` straight to corrected reduced coordinates, mm.
@@ -238,35 +330,75 @@ impl Interior {
         Ok(self.photo_to_pixel(x, y))
     }
 
-    /// `d(xc, yc) / d(x0, y0, k1, k2, p1, p2)` at measured photo-coordinates
+    /// `d(xc, yc) / d(x0, y0, k1, k2, p1, p2, k3)` at measured photo-coordinates
     /// `(x, y)` (columns in the order of [`io_param`]). The focal length enters
     /// through the projection, see [`Projection::d_focal`].
-    pub fn correction_jacobian(&self, x: f64, y: f64) -> [[f64; 6]; 2] {
+    pub fn correction_jacobian(&self, x: f64, y: f64) -> [[f64; io_param::COUNT]; 2] {
         let xb = x - self.principal_point_mm[0];
         let yb = y - self.principal_point_mm[1];
-        let r2 = xb * xb + yb * yb;
-        let j = self.distortion_jacobian(xb, yb);
-        // xc = xb - dx(xb, yb) with xb = x - x0: d/dx0 = -(1 - ddx/dxb), d/dy0 = ddx/dyb.
-        [
-            [
-                -(1.0 - j[0][0]),
-                j[0][1],
-                -xb * r2,
-                -xb * r2 * r2,
-                -(r2 + 2.0 * xb * xb),
-                -2.0 * xb * yb,
-            ],
-            [
-                j[1][0],
-                -(1.0 - j[1][1]),
-                -yb * r2,
-                -yb * r2 * r2,
-                -2.0 * xb * yb,
-                -(r2 + 2.0 * yb * yb),
-            ],
-        ]
+        match self.distortion_model {
+            DistortionModel::Correction => {
+                // xc = xb - d(xb; k) with xb = x - x0.
+                let j = self.distortion_jacobian(xb, yb);
+                let dk = Self::distortion_parameter_jacobian(xb, yb);
+                let mut out = [[0.0; io_param::COUNT]; 2];
+                for row in 0..2 {
+                    for (col, v) in dk[row].iter().enumerate() {
+                        out[row][col] = -v;
+                    }
+                    out[row][io_param::X0] = -(if row == 0 { 1.0 } else { 0.0 }) + j[row][0];
+                    out[row][io_param::Y0] = -(if row == 0 { 0.0 } else { 1.0 }) + j[row][1];
+                }
+                out
+            }
+            DistortionModel::Projection => {
+                // xc + d(xc; k) = x - x0: d(xc) = (I + J)^-1 (-dx0 - dd/dk dk).
+                let [xc, yc] = self.correct(x, y);
+                let j = self.distortion_jacobian(xc, yc);
+                let (a, b, c, d) = (1.0 + j[0][0], j[0][1], j[1][0], 1.0 + j[1][1]);
+                let det = a * d - b * c;
+                let inv = [[d / det, -b / det], [-c / det, a / det]];
+                let mut rhs = Self::distortion_parameter_jacobian(xc, yc);
+                for row in rhs.iter_mut() {
+                    for v in row.iter_mut() {
+                        *v = -*v;
+                    }
+                }
+                rhs[0][io_param::X0] = -1.0;
+                rhs[1][io_param::Y0] = -1.0;
+                let mut out = [[0.0; io_param::COUNT]; 2];
+                for row in 0..2 {
+                    for col in 0..io_param::COUNT {
+                        out[row][col] = inv[row][0] * rhs[0][col] + inv[row][1] * rhs[1][col];
+                    }
+                }
+                out
+            }
+        }
+    }
+
+    /// `d(dx, dy) / d(k1, k2, p1, p2, k3)` at reduced coordinates `(u, v)`, in the
+    /// columns of [`io_param`] (the principal point's columns zero).
+    fn distortion_parameter_jacobian(u: f64, v: f64) -> [[f64; io_param::COUNT]; 2] {
+        use io_param::*;
+        let r2 = u * u + v * v;
+        let mut out = [[0.0; COUNT]; 2];
+        for (row, w) in [u, v].into_iter().enumerate() {
+            out[row][K1] = w * r2;
+            out[row][K2] = w * r2 * r2;
+            out[row][K3] = w * r2 * r2 * r2;
+        }
+        out[0][P1] = r2 + 2.0 * u * u;
+        out[0][P2] = 2.0 * u * v;
+        out[1][P1] = 2.0 * u * v;
+        out[1][P2] = r2 + 2.0 * v * v;
+        out
     }
 }
+
+/// Newton's inverse of the distortion did not converge; its last iterate.
+#[derive(Debug, Clone, Copy)]
+struct Unsolved([f64; 2]);
 
 /// `Rw(omega)`, `Rp(phi)`, `Rk(kappa)` and their derivatives, as docs/conventions.md
 /// ("Rotation and collinearity") writes them.

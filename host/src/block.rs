@@ -13,7 +13,7 @@ use phototraverse_core::adjust::{
     intersect, AdjustConfig, ConstraintSigmas, Observation, Ray, Report, Robust, Window,
 };
 use phototraverse_core::budget::{Arena, MemoryBudget};
-use phototraverse_core::camera::{Interior, Pose, Rig};
+use phototraverse_core::camera::{DistortionModel, Interior, Pose, Rig};
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -186,8 +186,9 @@ impl Block {
                         pixel_size_mm: [v[2], v[3]],
                         focal_mm: v[4],
                         principal_point_mm: [v[5], v[6]],
-                        radial: [v[7], v[8]],
+                        radial: [v[7], v[8], 0.0],
                         decentering: [v[9], v[10]],
+                        distortion_model: DistortionModel::Correction,
                     };
                     cam.validate()
                         .map_err(|e| at(&bpath, ln, format!("camera: {e}")))?;
@@ -873,8 +874,9 @@ pub fn synthetic_block(
         pixel_size_mm: [0.005, 0.005],
         focal_mm: 8.0,
         principal_point_mm: [0.012, -0.008],
-        radial: [-2.0e-3, 1.0e-5],
+        radial: [-2.0e-3, 1.0e-5, 0.0],
         decentering: [1.0e-5, -2.0e-5],
+        distortion_model: DistortionModel::Correction,
     };
     let rig = Rig {
         left: cam,

@@ -30,6 +30,8 @@ enum Command {
     Adjust(commands::adjust::Args),
     /// Memory budget of a configuration and image size.
     Budget(commands::budget::Args),
+    /// Rig files: `rig import` writes rig.toml from an OpenCV or Kalibr calibration.
+    Rig(commands::rig::Args),
     /// Run the firmware on this computer (what `--link child` starts): the no_std loop
     /// with its link on stdin/stdout, `--tcp ADDR` or `--serial DEV`.
     #[command(hide = true)]
@@ -58,6 +60,7 @@ fn main() {
         Command::Match(a) => commands::match_pair::run(a),
         Command::Adjust(a) => commands::adjust::run(a),
         Command::Budget(a) => commands::budget::run(a),
+        Command::Rig(a) => commands::rig::run(a),
         Command::Firmware { args } => {
             std::process::exit(phototraverse_firmware_sim::hosted::main_with_args(args))
         }

@@ -1,7 +1,7 @@
 //! End-to-end tests of `phototraverse match`: the real Motorcycle crop with its ground
 //! truth (our extractor, NCC refinement on and off), a general rig read from rig.toml
 //! with synthetic features of known truth, and bad input.
-use phototraverse_core::camera::{project_to_pixel, Interior, Pose, Rig};
+use phototraverse_core::camera::{project_to_pixel, DistortionModel, Interior, Pose, Rig};
 use phototraverse_core::features::{Descriptor, Keypoint};
 use phototraverse_core::matching::synthetic::{SyntheticScene, DISTRACTOR};
 use phototraverse_host::dataset::write_rig;
@@ -122,8 +122,9 @@ fn general_rig_from_rig_toml() {
         pixel_size_mm: [0.01, 0.01],
         focal_mm: 5.0,
         principal_point_mm: [0.05, -0.03],
-        radial: [-4e-3, 2e-5],
+        radial: [-4e-3, 2e-5, 0.0],
         decentering: [3e-4, -2e-4],
+        distortion_model: DistortionModel::Correction,
     };
     let rig = Rig {
         left: cam,

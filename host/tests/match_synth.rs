@@ -128,7 +128,7 @@ fn synthetic_quads_are_right() {
     };
     let data: Vec<Frame> = (0..ds.epochs.len()).map(load).collect();
     let (w, h) = (ds.rig.left.width_px, ds.rig.left.height_px);
-    let geometry = if ds.rig.relative_angles == [0.0; 3] && ds.rig.left.radial == [0.0; 2] {
+    let geometry = if ds.rig.relative_angles == [0.0; 3] && ds.rig.left.radial == [0.0; 3] {
         StereoGeometry::Rectified {
             row_tolerance_px: 1.5,
             min_disparity_px: 0.0,

@@ -74,7 +74,7 @@ proptest! {
 #[test]
 fn rig_text_survives_arbitrary_values() {
     // Writing then reading keeps every camera value exactly.
-    use phototraverse_core::camera::{Interior, Pose, Rig};
+    use phototraverse_core::camera::{DistortionModel, Interior, Pose, Rig};
     let mut runner = proptest::test_runner::TestRunner::default();
     runner
         .run(
@@ -86,8 +86,9 @@ fn rig_text_survives_arbitrary_values() {
                     pixel_size_mm: [0.01, 0.012],
                     focal_mm: f,
                     principal_point_mm: [pp, -pp],
-                    radial: [k, k * 1e-3],
+                    radial: [k, k * 1e-3, 0.0],
                     decentering: [k, -k],
+                    distortion_model: DistortionModel::Correction,
                 };
                 let rig = Rig {
                     left: cam,

@@ -1,7 +1,7 @@
 //! The renderer's geometry: small discs at known 3D points render within
 //! 0.1 px of their collinearity projection, with and without distortion; and
 //! depth maps give true correspondences between the two cameras.
-use phototraverse_core::camera::{project_to_pixel, Interior, Pose, Rig};
+use phototraverse_core::camera::{project_to_pixel, DistortionModel, Interior, Pose, Rig};
 use phototraverse_host::synth::geometry::{Shape, V3};
 use phototraverse_host::synth::material::Material;
 use phototraverse_host::synth::render::{render, RenderSettings};
@@ -15,8 +15,9 @@ fn seed_left() -> Interior {
         pixel_size_mm: [0.0387, 0.0387],
         focal_mm: 34.6041,
         principal_point_mm: [0.4171, -0.3096],
-        radial: [-3.3147e-05, 1.30582e-07],
+        radial: [-3.3147e-05, 1.30582e-07, 0.0],
         decentering: [9.086e-05, -7.7278e-05],
+        distortion_model: DistortionModel::Correction,
     }
 }
 
@@ -84,8 +85,9 @@ fn discs_render_at_their_projection_without_distortion() {
         pixel_size_mm: [0.01, 0.01],
         focal_mm: 5.0,
         principal_point_mm: [0.0; 2],
-        radial: [0.0; 2],
+        radial: [0.0; 3],
         decentering: [0.0; 2],
+        distortion_model: DistortionModel::Correction,
     };
     let pose = Pose::from_degrees(91.3, -2.0, 4.0, [1.0, -3.0, 1.6]);
     let (err, n) = max_disc_error(&cam, &pose, 3.0);
@@ -102,7 +104,7 @@ fn discs_render_at_their_projection_with_distortion() {
     assert!(err < 0.1, "{err}");
     // The distortion is not negligible here: ignoring it would miss by more than a pixel.
     let mut pinhole = cam;
-    pinhole.radial = [0.0; 2];
+    pinhole.radial = [0.0; 3];
     pinhole.decentering = [0.0; 2];
     let p = [-2.0 + 8.0, 5.0 + 20.0, 1.7 + 4.0];
     let a = project_to_pixel(&pose, &cam, &p).unwrap();

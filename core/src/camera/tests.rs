@@ -22,8 +22,9 @@ fn seed_camera() -> Interior {
         pixel_size_mm: [0.0387, 0.0387],
         focal_mm: 34.6041,
         principal_point_mm: [0.4171, -0.3096],
-        radial: [-3.3147e-05, 1.30582e-07],
+        radial: [-3.3147e-05, 1.30582e-07, 0.0],
         decentering: [9.086e-05, -7.7278e-05],
+        distortion_model: DistortionModel::Correction,
     }
 }
 
@@ -67,7 +68,7 @@ fn distortion_correction_round_trip() {
 #[test]
 fn uncorrect_reports_divergence_instead_of_looping() {
     let mut cam = seed_camera();
-    cam.radial = [1.0, 0.0]; // absurd lens: the correction folds over within the format
+    cam.radial = [1.0, 0.0, 0.0]; // absurd lens: the correction folds over within the format
     assert!(cam.uncorrect(50.0, 50.0).is_err());
     assert_eq!(cam.uncorrect(f64::NAN, 0.0), Err(CameraError::NotFinite));
 }
@@ -190,39 +191,101 @@ fn projection_jacobians_match_central_differences() {
     }
 }
 
+/// The seed camera's lens, read the other way round (OpenCV's convention), with a
+/// third radial term: a lens of the same strength in the projection model.
+fn projection_camera() -> Interior {
+    Interior {
+        radial: [-3.3147e-05, 1.30582e-07, -2.0e-10],
+        distortion_model: DistortionModel::Projection,
+        ..seed_camera()
+    }
+}
+
 #[test]
 fn correction_jacobian_matches_central_differences() {
-    let base = seed_camera();
-    let mut rng = Lcg(5);
-    for _ in 0..200 {
-        let [x, y] = base.pixel_to_photo(rng.uniform(0.0, 575.0), rng.uniform(0.0, 383.0));
-        let jac = base.correction_jacobian(x, y);
-        // The correction is linear in k1, k2, p1, p2, so large steps are exact there.
-        let steps = [1e-6, 1e-6, 1e-4, 1e-6, 1e-4, 1e-4];
-        for (k, &h) in steps.iter().enumerate() {
-            let perturb = |s: f64| {
-                let mut c = base;
-                match k {
-                    io_param::X0 => c.principal_point_mm[0] += s,
-                    io_param::Y0 => c.principal_point_mm[1] += s,
-                    io_param::K1 => c.radial[0] += s,
-                    io_param::K2 => c.radial[1] += s,
-                    io_param::P1 => c.decentering[0] += s,
-                    _ => c.decentering[1] += s,
+    for base in [seed_camera(), projection_camera()] {
+        let mut rng = Lcg(5);
+        for _ in 0..200 {
+            let [x, y] = base.pixel_to_photo(rng.uniform(0.0, 575.0), rng.uniform(0.0, 383.0));
+            let jac = base.correction_jacobian(x, y);
+            let mut steps = [0.0; io_param::COUNT];
+            steps[io_param::X0] = 1e-6;
+            steps[io_param::Y0] = 1e-6;
+            steps[io_param::K1] = 1e-7;
+            steps[io_param::K2] = 1e-9;
+            steps[io_param::K3] = 1e-11;
+            steps[io_param::P1] = 1e-6;
+            steps[io_param::P2] = 1e-6;
+            for (k, &h) in steps.iter().enumerate() {
+                let perturb = |s: f64| {
+                    let mut c = base;
+                    match k {
+                        io_param::X0 => c.principal_point_mm[0] += s,
+                        io_param::Y0 => c.principal_point_mm[1] += s,
+                        io_param::K1 => c.radial[0] += s,
+                        io_param::K2 => c.radial[1] += s,
+                        io_param::K3 => c.radial[2] += s,
+                        io_param::P1 => c.decentering[0] += s,
+                        _ => c.decentering[1] += s,
+                    }
+                    c.correct(x, y)
+                };
+                let (a, b) = (perturb(h), perturb(-h));
+                for i in 0..2 {
+                    let num = (a[i] - b[i]) / (2.0 * h);
+                    assert!(
+                        (jac[i][k] - num).abs() <= 1e-5 * (1.0 + num.abs()),
+                        "{:?} io {k} row {i}: {} vs {num}",
+                        base.distortion_model,
+                        jac[i][k]
+                    );
                 }
-                c.correct(x, y)
-            };
-            let (a, b) = (perturb(h), perturb(-h));
-            for i in 0..2 {
-                let num = (a[i] - b[i]) / (2.0 * h);
-                assert!(
-                    (jac[i][k] - num).abs() <= 1e-5 * (1.0 + num.abs()),
-                    "io {k} row {i}: {} vs {num}",
-                    jac[i][k]
-                );
             }
         }
     }
+}
+
+#[test]
+fn projection_model_distorts_ideal_points_and_inverts_over_the_format() {
+    let cam = projection_camera();
+    assert_eq!(cam.validate(), Ok(()));
+    // The defining equation: an ideal point is measured at xc + d(xc).
+    let (xc, yc) = (4.0, -2.5);
+    let [x, y] = cam.uncorrect(xc, yc).unwrap();
+    let [dx, dy] = cam.distortion(xc, yc);
+    let [x0, y0] = cam.principal_point_mm;
+    assert!((x - (x0 + xc + dx)).abs() < 1e-15 && (y - (y0 + yc + dy)).abs() < 1e-15);
+    // Its inverse, by Newton, over the whole format.
+    let mut rng = Lcg(11);
+    for _ in 0..500 {
+        let [x, y] = cam.pixel_to_photo(rng.uniform(0.0, 575.0), rng.uniform(0.0, 383.0));
+        let [xc, yc] = cam.correct(x, y);
+        let [x2, y2] = cam.uncorrect(xc, yc).unwrap();
+        assert!((x - x2).abs() < 1e-10 && (y - y2).abs() < 1e-10);
+    }
+    // The two models differ at second order: the same coefficients do not give the
+    // same correction at the corner.
+    let [x, y] = cam.pixel_to_photo(0.0, 0.0);
+    let proj = cam.correct(x, y);
+    let corr = Interior {
+        distortion_model: DistortionModel::Correction,
+        ..cam
+    }
+    .correct(x, y);
+    assert!((proj[0] - corr[0]).abs() > 1e-6);
+}
+
+#[test]
+fn a_lens_that_folds_the_format_is_refused() {
+    // A third radial term fitted far beyond its data turns the distortion back
+    // within the format: no inverse exists there.
+    let cam = Interior {
+        radial: [0.0, 0.0, -1e-4],
+        ..projection_camera()
+    };
+    assert_eq!(cam.validate(), Err(CameraError::DistortionDiverged));
+    assert_eq!(projection_camera().validate(), Ok(()));
+    assert_eq!(seed_camera().validate(), Ok(()));
 }
 
 #[test]

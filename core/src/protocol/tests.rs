@@ -7,7 +7,7 @@ use super::crc::crc32;
 use super::messages::*;
 use super::samples::{sample_messages, sample_result};
 use super::*;
-use crate::camera::{CalibrationPrecision, Interior, Rig};
+use crate::camera::{CalibrationPrecision, DistortionModel, Interior, Rig};
 
 #[test]
 fn points_fill_to_the_payload_limit_and_round_trip() {
@@ -241,6 +241,24 @@ fn configure_v2_round_trips_and_v1_payloads_get_the_v1_behaviour() {
     assert_eq!(
         Configure::parse(&payload[..n4]),
         Err(ParseError::Invalid("calibration precision"))
+    );
+    // v5 appends each camera's distortion model and third radial term; v4 and
+    // older read as correction-model lenses with k3 = 0.
+    let mut v5 = Configure { version: 5, ..v4 };
+    v5.rig.right.distortion_model = DistortionModel::Projection;
+    v5.rig.right.radial[2] = -3e-9;
+    let n5 = v5.emit(&mut payload).unwrap();
+    assert_eq!(n5, 353);
+    assert_eq!(Configure::parse(&payload[..n5]).unwrap(), v5);
+    payload[n5 - 9] = 7;
+    assert_eq!(
+        Configure::parse(&payload[..n5]),
+        Err(ParseError::Invalid("distortion model"))
+    );
+    payload[n5 - 9] = 1;
+    assert_eq!(
+        Configure::parse(&payload[..n5 - 1]),
+        Err(ParseError::Truncated)
     );
     assert_eq!(back.traverse, TraverseSettings::default());
     assert_eq!(back.traverse.mode, AdjustMode::Window);

@@ -168,8 +168,7 @@ impl TraverseConfig {
             && rig.base_m[1] == 0.0
             && rig.base_m[2] == 0.0
             && rig.left == rig.right
-            && rig.left.radial == [0.0; 2]
-            && rig.left.decentering == [0.0; 2];
+            && rig.left.is_distortion_free();
         if !ideal {
             matching.stereo = StereoGeometry::Rig {
                 rig,

@@ -5,5 +5,6 @@ pub mod demo;
 pub mod eval;
 pub mod features;
 pub mod match_pair;
+pub mod rig;
 pub mod run;
 pub mod synth;

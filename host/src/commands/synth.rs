@@ -52,6 +52,11 @@ pub struct Args {
     /// view sampled by fewer (or more) pixels.
     #[arg(long, value_parser = parse_size)]
     pub size: Option<(u32, u32)>,
+    /// Render with the cameras of this rig file (yours, e.g. written by `rig import`)
+    /// instead of the scene's, to try the traverse on your rig before you drive; the
+    /// dataset then has the rig layout.
+    #[arg(long, value_name = "RIG_TOML")]
+    pub rig: Option<PathBuf>,
     /// Texture the facades with photographs (PNG, JPEG, ...): image files and the image
     /// files of directories, comma-separated; 1 to 3 cm per texel.
     #[arg(long, value_name = "PATH[,PATH...]", value_delimiter = ',')]
@@ -112,6 +117,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     };
     opts.jpeg_quality = a.jpeg;
     opts.size = a.size;
+    opts.rig = a
+        .rig
+        .as_deref()
+        .map(crate::dataset::read_rig)
+        .transpose()?
+        .map(|(rig, _)| rig);
     opts.photo_textures = a.photo_textures.clone();
     opts.calib_error =
         CalibError::parse(&a.calib_error).map_err(|e| anyhow::anyhow!("--calib-error: {e}"))?;

@@ -4,7 +4,7 @@
 //! `sy = fx/fy`, `f = fx`, `x0 = cx - (W-1)/2`, `y0 = -(cy - (H-1)/2) sy`, no
 //! distortion, base `B = -P1[0][3] / fx` along x.
 use super::DatasetError;
-use phototraverse_core::camera::{Interior, Rig};
+use phototraverse_core::camera::{DistortionModel, Interior, Rig};
 use phototraverse_core::traverse::CalibrationPrecision;
 
 /// The precision a KITTI `calib.txt` is taken to have: it states none, and its
@@ -133,8 +133,9 @@ fn interior(
             cx - (width as f64 - 1.0) * 0.5,
             -(cy - (height as f64 - 1.0) * 0.5) * sy,
         ],
-        radial: [0.0; 2],
+        radial: [0.0; 3],
         decentering: [0.0; 2],
+        distortion_model: DistortionModel::Correction,
     })
 }
 

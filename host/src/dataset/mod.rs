@@ -6,6 +6,7 @@
 //! malformed dataset fails at once with an error naming the file and the
 //! problem rather than in the middle of a run.
 pub mod aiding;
+pub mod calibration;
 mod error;
 mod image;
 pub mod kitti;

@@ -2,7 +2,7 @@
 //! reading with clear errors and writing.
 use super::aiding::GnssSetup;
 use super::DatasetError;
-use phototraverse_core::camera::{Interior, Pose, Rig};
+use phototraverse_core::camera::{CameraError, DistortionModel, Interior, Pose, Rig};
 use phototraverse_core::traverse::CalibrationPrecision;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -15,8 +15,48 @@ struct CameraToml {
     pixel_size_mm: [f64; 2],
     focal_mm: f64,
     principal_point_mm: [f64; 2],
-    radial: [f64; 2],
+    /// `[k1, k2]` or `[k1, k2, k3]`; absent for a camera without distortion.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    radial: Vec<f64>,
+    #[serde(default, skip_serializing_if = "is_zero_pair")]
     decentering: [f64; 2],
+    #[serde(default, skip_serializing_if = "is_correction")]
+    distortion_model: DistortionModelToml,
+}
+
+/// `distortion_model`: which way `radial` and `decentering` act.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+enum DistortionModelToml {
+    #[default]
+    Correction,
+    Projection,
+}
+
+fn is_zero_pair(v: &[f64; 2]) -> bool {
+    *v == [0.0; 2]
+}
+
+fn is_correction(m: &DistortionModelToml) -> bool {
+    *m == DistortionModelToml::Correction
+}
+
+impl From<DistortionModelToml> for DistortionModel {
+    fn from(m: DistortionModelToml) -> Self {
+        match m {
+            DistortionModelToml::Correction => DistortionModel::Correction,
+            DistortionModelToml::Projection => DistortionModel::Projection,
+        }
+    }
+}
+
+impl From<DistortionModel> for DistortionModelToml {
+    fn from(m: DistortionModel) -> Self {
+        match m {
+            DistortionModel::Correction => DistortionModelToml::Correction,
+            DistortionModel::Projection => DistortionModelToml::Projection,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -115,16 +155,32 @@ fn camera_from(c: &CameraToml, name: &'static str, path: &Path) -> Result<Interi
             c.pixel_size_mm
         )));
     }
+    if c.radial.len() > 3 {
+        return Err(bad(format!(
+            "radial has {} terms; it takes [k1, k2] or [k1, k2, k3]",
+            c.radial.len()
+        )));
+    }
+    let mut radial = [0.0; 3];
+    radial[..c.radial.len()].copy_from_slice(&c.radial);
     let cam = Interior {
         width_px: c.width_px,
         height_px: c.height_px,
         pixel_size_mm: c.pixel_size_mm,
         focal_mm: c.focal_mm,
         principal_point_mm: c.principal_point_mm,
-        radial: c.radial,
+        radial,
         decentering: c.decentering,
+        distortion_model: c.distortion_model.into(),
     };
-    cam.validate().map_err(|e| bad(e.to_string()))?;
+    cam.validate().map_err(|e| match e {
+        CameraError::DistortionDiverged => bad(
+            "the distortion (radial, decentering) cannot be undone everywhere on the \
+             image: it folds the format over itself"
+                .into(),
+        ),
+        e => bad(e.to_string()),
+    })?;
     Ok(cam)
 }
 
@@ -135,8 +191,13 @@ fn camera_to(c: &Interior) -> CameraToml {
         pixel_size_mm: c.pixel_size_mm,
         focal_mm: c.focal_mm,
         principal_point_mm: c.principal_point_mm,
-        radial: c.radial,
+        radial: match c.radial {
+            [0.0, 0.0, 0.0] => Vec::new(),
+            [k1, k2, 0.0] => vec![k1, k2],
+            k => k.to_vec(),
+        },
         decentering: c.decentering,
+        distortion_model: c.distortion_model.into(),
     }
 }
 
@@ -401,5 +462,44 @@ base_mm = [400.0, 0.0, 0.0]
             .unwrap_err()
             .to_string();
         assert!(e.contains("base_mm is zero"), "{e}");
+    }
+
+    #[test]
+    fn a_pinhole_needs_no_distortion_keys_and_a_third_radial_term_round_trips() {
+        let pinhole = SEED_RIG
+            .lines()
+            .filter(|l| !l.starts_with("radial") && !l.starts_with("decentering"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        let (rig, _) = parse_rig(&pinhole, Path::new("rig.toml")).unwrap();
+        assert!(rig.left.is_distortion_free() && rig.right.is_distortion_free());
+        assert_eq!(rig.left.distortion_model, DistortionModel::Correction);
+
+        let k3 = SEED_RIG.replacen(
+            "radial = [-3.3147e-05, 1.30582e-07]",
+            "radial = [-3.3147e-05, 1.30582e-07, -2e-10]\ndistortion_model = \"projection\"",
+            1,
+        );
+        let (rig, datum) = parse_rig(&k3, Path::new("rig.toml")).unwrap();
+        assert_eq!(rig.left.radial[2], -2e-10);
+        assert_eq!(rig.left.distortion_model, DistortionModel::Projection);
+        assert_eq!(rig.right.distortion_model, DistortionModel::Correction);
+        let (back, _) = parse_rig(&rig_toml_text(&rig, &datum), Path::new("x")).unwrap();
+        assert_eq!(back.left, rig.left);
+        assert_eq!(back.right, rig.right);
+
+        let four = SEED_RIG.replacen("1.30582e-07]", "1.30582e-07, 0.0, 1.0]", 1);
+        let e = parse_rig(&four, Path::new("rig.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("radial has 4 terms"), "{e}");
+        let folded = SEED_RIG.replacen("1.30582e-07]", "1.30582e-07, -1e-4]", 1);
+        let e = parse_rig(&folded, Path::new("rig.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("left camera") && e.contains("folds the format"),
+            "{e}"
+        );
     }
 }

@@ -16,7 +16,7 @@
 use super::records::TiePoint;
 use anyhow::{Context, Result};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
-use phototraverse_core::camera::{Interior, Pose, Rig};
+use phototraverse_core::camera::{DistortionModel, Interior, Pose, Rig};
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::Path;
@@ -94,8 +94,9 @@ impl Pinhole {
 /// `interior` without its lens distortion.
 fn ideal(interior: &Interior) -> Interior {
     Interior {
-        radial: [0.0; 2],
+        radial: [0.0; 3],
         decentering: [0.0; 2],
+        distortion_model: DistortionModel::Correction,
         ..*interior
     }
 }
@@ -290,8 +291,9 @@ mod tests {
             pixel_size_mm: [0.005, 0.0052],
             focal_mm: 4.0,
             principal_point_mm: [0.03, -0.02],
-            radial: [-2e-3, 1e-5],
+            radial: [-2e-3, 1e-5, 0.0],
             decentering: [1e-5, -2e-5],
+            distortion_model: DistortionModel::Correction,
         };
         Rig {
             left: camera,
@@ -393,7 +395,7 @@ mod tests {
     #[test]
     fn without_distortion_the_points_are_the_measured_pixels_shifted_by_half_a_pixel() {
         let mut camera = rig().left;
-        camera.radial = [0.0; 2];
+        camera.radial = [0.0; 3];
         camera.decentering = [0.0; 2];
         let [c, r] = corrected_pixel(&camera, 100.25, 50.75);
         assert!(

@@ -21,7 +21,7 @@ pub mod writer;
 use crate::dataset::{kitti, rigfile, GT_FILE, TIMES_FILE};
 use crate::poses::{write_poses, KittiPose};
 use anyhow::{bail, Context};
-use phototraverse_core::camera::{kitti_from_pose, Pose};
+use phototraverse_core::camera::{kitti_from_pose, Pose, Rig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use realism::{develop, gaussian_blur, CalibError, Imperfections};
@@ -48,6 +48,9 @@ pub struct SynthOptions {
     /// Image size `(width, height)` instead of the scene's: the same sensor and field of
     /// view sampled by other pixels (see [`resample`]).
     pub size: Option<(u32, u32)>,
+    /// Render with these cameras instead of the scene's (a user's rig, e.g. from
+    /// `rig import`); the scene's path and datum stay.
+    pub rig: Option<Rig>,
     /// Texture the facades with these photographs (files, or directories of them;
     /// [`photo`]); none: the procedural facades.
     pub photo_textures: Vec<PathBuf>,
@@ -70,6 +73,7 @@ impl SynthOptions {
             edge_ss: RenderSettings::default().edge_ss,
             progress: false,
             size: None,
+            rig: None,
             photo_textures: Vec::new(),
             aiding: aiding::AidingOptions::default(),
         }
@@ -143,6 +147,12 @@ pub fn resample(
 /// Renders and writes the dataset.
 pub fn generate(opts: &SynthOptions) -> anyhow::Result<SynthSummary> {
     let mut plan = plan(&opts.scene, opts.frames, opts.seed).map_err(anyhow::Error::msg)?;
+    if let Some(rig) = opts.rig {
+        plan.rig = rig;
+        // A user's cameras have their lenses and relative orientation, which only
+        // the rig layout can state.
+        plan.layout = LayoutChoice::Rig;
+    }
     if let Some((w, h)) = opts.size {
         plan.rig.left = resample(&plan.rig.left, w, h)?;
         plan.rig.right = resample(&plan.rig.right, w, h)?;
@@ -158,11 +168,8 @@ pub fn generate(opts: &SynthOptions) -> anyhow::Result<SynthSummary> {
     let mut written = opts.calib_error.perturb(&truth, &mut calib_rng);
     let mut render_rig = truth;
     if layout == LayoutChoice::Kitti {
-        let distorted = |c: &phototraverse_core::camera::Interior| {
-            c.radial != [0.0; 2] || c.decentering != [0.0; 2]
-        };
-        if distorted(&truth.left)
-            || distorted(&truth.right)
+        if !truth.left.is_distortion_free()
+            || !truth.right.is_distortion_free()
             || truth.relative_angles != [0.0; 3]
             || truth.base_m[1..] != [0.0; 2]
         {

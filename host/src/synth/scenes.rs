@@ -5,7 +5,7 @@ use super::scene::{
     build_street, car, vehicle, Primitive, Scene, StreetStyle, VehicleKind, Zone, ZoneKind,
 };
 use nalgebra::{Matrix3, Vector3};
-use phototraverse_core::camera::{rotation, Interior, Pose, Rig};
+use phototraverse_core::camera::{rotation, DistortionModel, Interior, Pose, Rig};
 use std::f64::consts::FRAC_PI_2;
 
 /// Names accepted by `synth --scene`.
@@ -340,8 +340,9 @@ fn pinhole_mm(w: u32, h: u32, pixel: [f64; 2], f: f64) -> Interior {
         pixel_size_mm: pixel,
         focal_mm: f,
         principal_point_mm: [0.0; 2],
-        radial: [0.0; 2],
+        radial: [0.0; 3],
         decentering: [0.0; 2],
+        distortion_model: DistortionModel::Correction,
     }
 }
 
@@ -375,14 +376,16 @@ pub fn plan(name: &str, frames: Option<usize>, seed: u64) -> Result<ScenePlan, S
                 pixel_size_mm: px,
                 focal_mm: 34.6041,
                 principal_point_mm: [0.4171, -0.3096],
-                radial: [-3.3147e-05, 1.30582e-07],
+                radial: [-3.3147e-05, 1.30582e-07, 0.0],
                 decentering: [9.086e-05, -7.7278e-05],
+                distortion_model: DistortionModel::Correction,
             };
             let right = Interior {
                 focal_mm: 35.1727,
                 principal_point_mm: [0.2309, -0.1701],
-                radial: [-3.7141e-05, 1.77645e-07],
+                radial: [-3.7141e-05, 1.77645e-07, 0.0],
                 decentering: [7.00283e-05, -1.4916e-05],
+                distortion_model: DistortionModel::Correction,
                 ..left
             };
             let rig = Rig {

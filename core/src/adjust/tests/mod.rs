@@ -9,7 +9,7 @@ use super::geometry::{project_rig, Camera, RigParams};
 use super::quality::{chi2_quantile, ChiSquareTest};
 use super::*;
 use crate::budget::{Arena, MemoryBudget};
-use crate::camera::{project, Interior, Pose, Rig};
+use crate::camera::{project, DistortionModel, Interior, Pose, Rig};
 use nalgebra::Vector3;
 use std::vec;
 use std::vec::Vec;
@@ -64,8 +64,9 @@ pub(crate) fn scene(seed: u64, epochs: usize, n_points: usize, gross: f64) -> Sc
         pixel_size_mm: [PIXEL_MM, PIXEL_MM],
         focal_mm: 8.0,
         principal_point_mm: [0.0, 0.0],
-        radial: [0.0, 0.0],
+        radial: [0.0, 0.0, 0.0],
         decentering: [0.0, 0.0],
+        distortion_model: DistortionModel::Correction,
     };
     let mut rig = Rig::rectified(cam, 0.5);
     rig.relative_angles = [0.002, -0.004, 0.001];

@@ -10,7 +10,7 @@ use super::refine::refine_match;
 use super::synthetic::{SyntheticScene, DISTRACTOR};
 use super::*;
 use crate::budget::{Arena, MemoryBudget};
-use crate::camera::{project_to_pixel, Interior, Pose, Rig};
+use crate::camera::{project_to_pixel, DistortionModel, Interior, Pose, Rig};
 use crate::features::{Descriptor, Keypoint};
 use crate::image::ImageView;
 
@@ -217,8 +217,9 @@ fn general_rig_with_distortion_and_rotation() {
         pixel_size_mm: [0.01, 0.01],
         focal_mm: 5.0,
         principal_point_mm: [0.05, -0.03],
-        radial: [-4e-3, 2e-5],
+        radial: [-4e-3, 2e-5, 0.0],
         decentering: [3e-4, -2e-4],
+        distortion_model: DistortionModel::Correction,
     };
     let rig = Rig {
         left: cam,

@@ -1,11 +1,11 @@
 //! The configuration the host sends (rig, pipeline settings, traverse settings), its
 //! limits, and the firmware's acceptance.
 use super::*;
-use crate::camera::{CalibrationPrecision, Interior, Rig};
+use crate::camera::{CalibrationPrecision, DistortionModel, Interior, Rig};
 
 /// Payload version of [`Configure`] this build writes. Later versions append
 /// fields; a parser reads the fields it knows and ignores the rest.
-pub const CONFIG_VERSION: u16 = 4;
+pub const CONFIG_VERSION: u16 = 5;
 
 /// Pipeline capacities and thresholds, plain numbers the firmware maps to its config.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -241,9 +241,40 @@ fn parse_interior(r: &mut Reader) -> Result<Interior, ParseError> {
         pixel_size_mm: r.f64s()?,
         focal_mm: r.f64()?,
         principal_point_mm: r.f64s()?,
-        radial: r.f64s()?,
+        radial: {
+            let [k1, k2] = r.f64s()?;
+            [k1, k2, 0.0]
+        },
         decentering: r.f64s()?,
+        distortion_model: DistortionModel::Correction,
     })
+}
+
+/// Wire code of a [`DistortionModel`] (Configure v5).
+const fn distortion_model_code(m: DistortionModel) -> u8 {
+    match m {
+        DistortionModel::Correction => 0,
+        DistortionModel::Projection => 1,
+    }
+}
+
+fn parse_distortion_model(code: u8) -> Result<DistortionModel, ParseError> {
+    [DistortionModel::Correction, DistortionModel::Projection]
+        .into_iter()
+        .find(|m| distortion_model_code(*m) == code)
+        .ok_or(ParseError::Invalid("distortion model"))
+}
+
+/// The v5 tail of one camera: its distortion model and third radial term.
+fn parse_lens(r: &mut Reader, i: &mut Interior) -> Result<(), ParseError> {
+    i.distortion_model = parse_distortion_model(r.u8()?)?;
+    i.radial[2] = r.f64()?;
+    Ok(())
+}
+
+fn emit_lens(w: &mut Writer, i: &Interior) -> Result<(), EncodeError> {
+    w.u8(distortion_model_code(i.distortion_model))?;
+    w.f64(i.radial[2])
 }
 
 fn emit_interior(w: &mut Writer, i: &Interior) -> Result<(), EncodeError> {
@@ -252,7 +283,7 @@ fn emit_interior(w: &mut Writer, i: &Interior) -> Result<(), EncodeError> {
     w.f64s(&i.pixel_size_mm)?;
     w.f64(i.focal_mm)?;
     w.f64s(&i.principal_point_mm)?;
-    w.f64s(&i.radial)?;
+    w.f64s(&[i.radial[0], i.radial[1]])?;
     w.f64s(&i.decentering)
 }
 
@@ -264,7 +295,7 @@ repr!(
         if version == 0 {
             return Err(ParseError::Invalid("configuration version 0"));
         }
-        let rig = Rig {
+        let mut rig = Rig {
             left: parse_interior(&mut r)?,
             right: parse_interior(&mut r)?,
             relative_angles: r.f64s()?,
@@ -312,6 +343,10 @@ repr!(
             if !p.valid() {
                 return Err(ParseError::Invalid("calibration precision"));
             }
+        }
+        if version >= 5 {
+            parse_lens(&mut r, &mut rig.left)?;
+            parse_lens(&mut r, &mut rig.right)?;
         }
         // Fields of later versions follow; this build ignores them.
         let _ = r.rest();
@@ -369,6 +404,12 @@ repr!(
             w.f64(c.focal)?;
             w.f64(c.angles_rad)?;
             w.f64(c.base_m)?;
+        }
+        // Earlier versions carry no lens model: their cameras are read as
+        // correction-model lenses with k3 = 0.
+        if s.version >= 5 {
+            emit_lens(&mut w, &s.rig.left)?;
+            emit_lens(&mut w, &s.rig.right)?;
         }
     }
 );
