@@ -1,4 +1,5 @@
 //! `report.html`: a self-contained page with SVG plots (plotters) and tables.
+use super::glance;
 use super::records::{CapacityLine, MemoryLine, RunReport};
 use anyhow::{anyhow, Context, Result};
 use plotters::prelude::*;
@@ -6,13 +7,18 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 const SIZE: (u32, u32) = (720, 400);
-const PALETTE: [RGBColor; 6] = [
+/// Ten distinct colours (Tableau 10), so that the stages' lines never share one.
+const PALETTE: [RGBColor; 10] = [
     RGBColor(31, 119, 180),
     RGBColor(214, 39, 40),
     RGBColor(44, 160, 44),
     RGBColor(255, 127, 14),
     RGBColor(148, 103, 189),
     RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+    RGBColor(188, 189, 34),
+    RGBColor(23, 190, 207),
 ];
 
 /// One named polyline of a chart.
@@ -124,17 +130,28 @@ fn chart(
                 .label(s.name.clone())
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
         }
-        if series.len() > 1 {
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw()
-                .map_err(|e| anyhow!("{e:?}"))?;
-        }
         root.present().map_err(|e| anyhow!("{e:?}"))?;
     }
+    if series.len() > 1 {
+        svg.push_str(&legend(series));
+    }
     Ok(svg)
+}
+
+/// The key of a chart's series, under it in the page: drawn inside the plot it
+/// covered the data.
+fn legend(series: &[Series]) -> String {
+    let mut html = String::from("<p class=\"legend\">");
+    for (i, s) in series.iter().enumerate() {
+        let RGBColor(r, g, b) = PALETTE[i % PALETTE.len()];
+        let _ = write!(
+            html,
+            "<span style=\"color:rgb({r},{g},{b})\">&#9644;</span> {} &nbsp; ",
+            html_escape(&s.name)
+        );
+    }
+    html.push_str("</p>");
+    html
 }
 
 /// The GNSS sections, when the run had fixes: the trajectory by fix availability,
@@ -590,7 +607,7 @@ fn evaluation_table(ev: &serde_json::Value) -> String {
     t
 }
 
-fn html_escape(s: &str) -> String {
+pub(crate) fn html_escape(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
@@ -615,6 +632,19 @@ pub fn write_html(path: &Path, report: &RunReport) -> Result<()> {
         "Trajectory seen from above",
         line_chart("Trajectory (top view)", "X (m)", "Y (m)", &trajectory, true)?,
     )];
+    let error = glance::position_error_series(report);
+    if !error.is_empty() {
+        sections.push((
+            "Position error",
+            line_chart(
+                "Error of the left camera's position (estimate - truth)",
+                "epoch",
+                "cm",
+                &error,
+                false,
+            )?,
+        ));
+    }
     let per_length = report
         .evaluation
         .as_ref()
@@ -644,13 +674,48 @@ pub fn write_html(path: &Path, report: &RunReport) -> Result<()> {
             )?,
         ));
     }
-    let sigma0 = [Series {
-        name: "sigma0".into(),
-        points: per_epoch(report, |e| e.sigma0),
-    }];
     sections.push((
-        "sigma0 a posteriori",
-        line_chart("sigma0 per epoch", "epoch", "sigma0", &sigma0, false)?,
+        "Attitude",
+        line_chart(
+            "Attitude of the left camera, change since the first epoch",
+            "epoch",
+            "deg",
+            &glance::attitude_series(report),
+            false,
+        )?,
+    ));
+    sections.push((
+        "Height",
+        line_chart(
+            "Height of the left camera",
+            "epoch",
+            "Z (m)",
+            &glance::height_series(report),
+            false,
+        )?,
+    ));
+    let sd = glance::position_sd_series(report);
+    if !sd.is_empty() {
+        sections.push((
+            "Precision",
+            line_chart(
+                "Standard deviations of the left camera's position (datum: the first epoch)",
+                "epoch",
+                "cm",
+                &sd,
+                false,
+            )?,
+        ));
+    }
+    sections.push((
+        "sigma0 a posteriori and the global test",
+        line_chart(
+            "sigma0 per epoch, within the global test's bounds when the test passes",
+            "epoch",
+            "sigma0",
+            &glance::sigma0_series(report),
+            false,
+        )?,
     ));
     let ties = [Series {
         name: "tie points".into(),
@@ -693,7 +758,8 @@ pub fn write_html(path: &Path, report: &RunReport) -> Result<()> {
         page,
         "<!doctype html><html><head><meta charset=\"utf-8\"><title>phototraverse report</title>\
          <style>body{{font-family:sans-serif;max-width:780px;margin:auto}}\
-         table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:2px 6px;text-align:right}}</style>\
+         table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:2px 6px;text-align:right}}\
+         table.summary td{{text-align:left}}p.legend{{margin-top:0;font-size:90%}}</style>\
          </head><body><h1>phototraverse: {}</h1><p>mode {}, {} epochs of {}x{} px, {} flagged.</p>",
         html_escape(&report.dataset),
         html_escape(&report.mode),
@@ -702,6 +768,10 @@ pub fn write_html(path: &Path, report: &RunReport) -> Result<()> {
         report.image_height,
         report.flagged_epochs()
     );
+    let _ = write!(page, "<h2>Summary</h2>{}", glance::summary_table(report));
+    if let Some(t) = glance::flagged_table(report) {
+        let _ = write!(page, "<h2>Epochs flagged, predicted or lost</h2>{t}");
+    }
     if report.interrupted {
         let _ = write!(
             page,
@@ -775,11 +845,18 @@ mod tests {
                     0.0,
                     [0.0, k as f64 * 1.01, 0.0],
                 ),
-                None,
+                Some([1e-4, 1e-4, 1e-4, 0.01, 0.02, 0.01]),
             );
             report.epochs.push(EpochRecord {
                 sigma0: Some(1.0),
                 chi2_passed: Some(true),
+                chi2: Some(EpochChi2 {
+                    statistic: 100.0,
+                    dof: 100,
+                    lower: 74.2,
+                    upper: 129.6,
+                    result: "passed".into(),
+                }),
                 observations: 100,
                 tie_points: 25,
                 keypoints: [1000, 990],
@@ -788,6 +865,8 @@ mod tests {
                 ..EpochRecord::posed(k, None, EpochStatus::Ok, (eop, eop))
             });
         }
+        report.epochs[3].status = EpochStatus::Flagged;
+        report.epochs[3].note = Some("chi-square test failed".into());
         report.ground_truth = Some((0..5).map(|k| [0.0, k as f64, 0.0]).collect());
         report.residuals_px = vec![0.1, 0.2, 0.5, 1.5];
         report.memory = vec![MemoryLine {
@@ -813,7 +892,7 @@ mod tests {
         let path = dir.path().join("report.html");
         write_html(&path, &report).unwrap();
         let page = std::fs::read_to_string(&path).unwrap();
-        assert_eq!(page.matches("<svg").count(), 8);
+        assert_eq!(page.matches("<svg").count(), 12);
         // The evaluation as tables rounded for reading, not as JSON.
         assert!(page.contains("<td>0.250 %</td>") && page.contains("<td>0.012 m</td>"));
         assert!(!page.contains("0.0123456"));
@@ -822,7 +901,12 @@ mod tests {
             "KITTI drift against segment length: translation",
             "KITTI drift against segment length: rotation",
             "Position error over the distance travelled",
+            "(estimate - truth)",
+            "Attitude",
+            "Height",
+            "Standard deviations of the left camera",
             "sigma0",
+            "lower bound of the global test",
             "Tie points",
             "Residuals",
             "Time per stage",
@@ -831,14 +915,25 @@ mod tests {
             assert!(page.contains(title), "{title} missing");
         }
         assert!(page.contains("straight &lt;synthetic&gt;"));
-        // The trajectory draws the truth first, under the estimate.
+        // The summary and the epochs that need a look come first, in words.
+        let summary =
+            &page[page.find("<h2>Summary</h2>").unwrap()..page.find("<h2>Trajectory").unwrap()];
+        assert!(summary
+            .contains("5 (4 adjusted without remark, 1 flagged, 0 predicted, 0 lost on the link)"));
+        assert!(summary.contains("<td>3</td><td>flagged</td><td>25</td>"));
+        assert!(summary.contains("chi-square test failed"));
+        // The trajectory draws the truth (first colour) first, under the estimate
+        // (second colour); the key is under the plot, where it covers nothing.
         let top_view = &page[page.find("Trajectory (top view)").unwrap()..];
-        let top_view = &top_view[..top_view.find("</svg>").unwrap()];
+        let (svg, after) = top_view.split_at(top_view.find("</svg>").unwrap());
         let (truth, estimate) = (
-            top_view.find("ground truth").unwrap(),
-            top_view.find("estimate (left camera)").unwrap(),
+            svg.find("stroke=\"#1F77B4\"").unwrap(),
+            svg.find("stroke=\"#D62728\"").unwrap(),
         );
         assert!(truth < estimate, "the estimate is drawn under the truth");
+        assert!(!svg.contains("ground truth"));
+        let key = &after[..after.find("<h2>").unwrap()];
+        assert!(key.contains("ground truth") && key.contains("estimate (left camera)"));
         assert!(page.contains("<td>window_points</td><td>252</td><td>177</td>"));
         assert!(!page.contains("On the microcontroller"));
 
@@ -889,8 +984,8 @@ mod tests {
         }
         write_html(&path, &report).unwrap();
         let page = std::fs::read_to_string(&path).unwrap();
-        // The 8 plots above and 4 more: GNSS availability, position error, residuals, speed.
-        assert_eq!(page.matches("<svg").count(), 12);
+        // The 12 plots above and 4 more: GNSS availability, position error, residuals, speed.
+        assert_eq!(page.matches("<svg").count(), 16);
         for title in [
             "GNSS availability",
             "Position error",
