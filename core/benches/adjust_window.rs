@@ -9,9 +9,10 @@
 //!
 //! `... --bench adjust_window -- --sweep` runs the accuracy sweep (2..20 epochs,
 //! 50..500 points, clean and with 10 % blunders of 10..50 px) and prints the bars.
-use phototraverse_core::adjust::geometry::{project_rig, Camera, RigParams};
+use phototraverse_core::adjust::geometry::project_rig;
 use phototraverse_core::adjust::{AdjustConfig, Observation, Robust, Window};
 use phototraverse_core::budget::{Arena, MemoryBudget};
+use phototraverse_core::camera::{Camera, RelativeOrientation};
 use phototraverse_core::camera::{DistortionModel, Interior, Pose, Rig};
 use std::fmt::Write as _;
 use std::time::Instant;
@@ -65,7 +66,7 @@ fn rig() -> Rig {
 fn scene(seed: u64, epochs: usize, n_points: usize, gross: f64, span: usize) -> Scene {
     let mut rng = Rng(seed);
     let rig = rig();
-    let rp = RigParams::from_rig(&rig);
+    let rp = RelativeOrientation::from_rig(&rig);
     let mut poses = Vec::new();
     let (mut x, mut y) = (0.0, 0.0);
     for k in 0..epochs {
@@ -261,7 +262,7 @@ fn window_update(out: &std::path::Path) {
 
     // The problem, in the window's terms (object coordinates; the datum prior on epoch 0).
     let sig = cfg.sigmas;
-    let rp = RigParams::from_rig(&s.rig);
+    let rp = RelativeOrientation::from_rig(&s.rig);
     let mut pj = String::new();
     write!(
         pj,

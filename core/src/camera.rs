@@ -623,8 +623,7 @@ impl Rig {
     }
 
     pub fn relative_rotation(&self) -> Matrix3<f64> {
-        let [w, p, k] = self.relative_angles;
-        rotation(w, p, k)
+        self.relative().rotation()
     }
 
     /// Length of the base, metres.
@@ -632,12 +631,14 @@ impl Rig {
         Vector3::from(self.base_m).norm()
     }
 
+    /// The right camera's orientation relative to the left.
+    pub fn relative(&self) -> RelativeOrientation {
+        RelativeOrientation::from_rig(self)
+    }
+
     /// Pose of the right camera given the left one.
     pub fn right_pose(&self, left: &Pose) -> Pose {
-        let ml = left.rotation();
-        let mr = self.relative_rotation() * ml;
-        let cr = left.centre_vec() + ml.transpose() * Vector3::from(self.base_m);
-        Pose::from_rotation(&mr, [cr[0], cr[1], cr[2]])
+        self.relative().right_pose(left)
     }
 
     pub fn validate(&self) -> Result<(), CameraError> {
@@ -653,6 +654,79 @@ impl Rig {
         } else {
             Err(CameraError::NotFinite)
         }
+    }
+}
+
+/// Which camera of the rig took an image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Camera {
+    Left = 0,
+    Right = 1,
+}
+
+impl Camera {
+    pub fn from_index(i: u8) -> Option<Camera> {
+        match i {
+            0 => Some(Camera::Left),
+            1 => Some(Camera::Right),
+            _ => None,
+        }
+    }
+
+    pub fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// The right camera's orientation relative to the left (docs/conventions.md, "Stereo
+/// rig"): `M_R = Mrel M_L`, `C_R = C_L + M_L^T b`; as adjustable parameters
+/// `[w, p, k (rad), bx, by, bz (m)]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RelativeOrientation {
+    /// `(omega, phi, kappa)` of `Mrel`, radians.
+    pub angles: [f64; 3],
+    /// `b` in the left camera frame, metres.
+    pub base: [f64; 3],
+}
+
+impl RelativeOrientation {
+    pub fn from_rig(rig: &Rig) -> Self {
+        RelativeOrientation {
+            angles: rig.relative_angles,
+            base: rig.base_m,
+        }
+    }
+
+    pub fn to_array(&self) -> [f64; 6] {
+        let [a, b, c] = self.angles;
+        let [x, y, z] = self.base;
+        [a, b, c, x, y, z]
+    }
+
+    pub fn from_array(p: &[f64; 6]) -> Self {
+        RelativeOrientation {
+            angles: [p[0], p[1], p[2]],
+            base: [p[3], p[4], p[5]],
+        }
+    }
+
+    /// Length of the base vector, metres.
+    pub fn base_length(&self) -> f64 {
+        Vector3::from(self.base).norm()
+    }
+
+    pub fn rotation(&self) -> Matrix3<f64> {
+        let [w, p, k] = self.angles;
+        rotation(w, p, k)
+    }
+
+    /// Pose of the right camera given the left one.
+    pub fn right_pose(&self, left: &Pose) -> Pose {
+        let ml = left.rotation();
+        let mr = self.rotation() * ml;
+        let cr = left.centre_vec() + ml.transpose() * Vector3::from(self.base);
+        Pose::from_rotation(&mr, [cr[0], cr[1], cr[2]])
     }
 }
 

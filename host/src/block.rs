@@ -7,12 +7,13 @@
 //! `odometer.txt`. Every parse error names the file and the line.
 
 use anyhow::{anyhow, Context, Result};
-use phototraverse_core::adjust::geometry::{camera_pose, Camera, RigParams};
+use phototraverse_core::adjust::geometry::camera_pose;
 use phototraverse_core::adjust::weighting::{weights, Scheme};
 use phototraverse_core::adjust::{
     intersect, AdjustConfig, ConstraintSigmas, Observation, Ray, Report, Robust, Window,
 };
 use phototraverse_core::budget::{Arena, MemoryBudget};
+use phototraverse_core::camera::{Camera, RelativeOrientation};
 use phototraverse_core::camera::{DistortionModel, Interior, Pose, Rig};
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
@@ -595,7 +596,7 @@ pub struct Adjusted {
     /// Points left out (no intersection, too few rays, at infinity).
     pub skipped_points: Vec<u64>,
     pub flagged: Vec<Flagged>,
-    pub rig: RigParams,
+    pub rig: RelativeOrientation,
     pub rig_std: [f64; 6],
     pub budget_bytes: usize,
 }
@@ -670,7 +671,7 @@ pub fn adjust(block: &Block) -> Result<Adjusted> {
         w.set_odometer(*e, *d, *sg)
             .map_err(|er| anyhow!("odometer epoch {e}: {er}"))?;
     }
-    let rp = RigParams::from_rig(&block.rig);
+    let rp = RelativeOrientation::from_rig(&block.rig);
     let focal = |c: Camera| {
         if c == Camera::Left {
             block.rig.left.focal_mm
@@ -829,7 +830,7 @@ pub fn adjust(block: &Block) -> Result<Adjusted> {
 
 /// Standard deviations of the right camera from the left camera's covariance
 /// (rig held at its estimate): `J Sigma J^T` with `J` by central differences.
-fn right_std(left: &Pose, rig: &RigParams, cov: &[f64; 36]) -> [f64; 6] {
+fn right_std(left: &Pose, rig: &RelativeOrientation, cov: &[f64; 36]) -> [f64; 6] {
     let h = 1e-7;
     let mut j = [[0.0; 6]; 6];
     for k in 0..6 {
@@ -884,7 +885,7 @@ pub fn synthetic_block(
         relative_angles: [0.002, -0.004, 0.001],
         base_m: [0.5, 0.003, -0.002],
     };
-    let rp = RigParams::from_rig(&rig);
+    let rp = RelativeOrientation::from_rig(&rig);
     let mut truth = Vec::new();
     let (mut x, mut y) = (0.0, 0.0);
     for k in 0..epochs {

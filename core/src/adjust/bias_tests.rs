@@ -7,8 +7,9 @@
 extern crate std;
 use super::geometry::project_rig;
 use super::tests::Rng;
-use super::{Camera, Observation, RigParams, Window};
+use super::{Observation, Window};
 use crate::budget::{Arena, MemoryBudget};
+use crate::camera::{Camera, RelativeOrientation};
 use crate::camera::{Interior, Pose, Rig};
 use crate::traverse::TraverseConfig;
 use nalgebra::Matrix3;
@@ -95,7 +96,7 @@ fn exact_observations_leave_no_systematic_step_error() {
 
     let mut rng = Rng(5);
     let points = street_points(&mut rng, 1500);
-    let rp = RigParams::from_rig(&rig);
+    let rp = RelativeOrientation::from_rig(&rig);
     let half = [320.0, 240.0];
     let wt = 1.0 / libm::pow(cfg.sigma_px, 2.0);
     let mut ids: Vec<Option<u32>> = vec![None; points.len()];

@@ -11,59 +11,10 @@
 //!
 //! Then `xc = -f u/w`, `yc = -f v/w` as in [`crate::camera`].
 
-use crate::camera::{rotation_with_derivatives, CameraError, Pose, Rig, MIN_DEPTH};
+use crate::camera::{
+    rotation_with_derivatives, Camera, CameraError, Pose, RelativeOrientation, MIN_DEPTH,
+};
 use nalgebra::{Matrix3, Vector3};
-
-/// Which camera of the rig took an image.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Camera {
-    Left = 0,
-    Right = 1,
-}
-
-impl Camera {
-    pub fn from_index(i: u8) -> Option<Camera> {
-        match i {
-            0 => Some(Camera::Left),
-            1 => Some(Camera::Right),
-            _ => None,
-        }
-    }
-}
-
-/// The relative orientation as adjustable parameters: `[w, p, k (rad), bx, by, bz (m)]`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RigParams {
-    pub angles: [f64; 3],
-    pub base: [f64; 3],
-}
-
-impl RigParams {
-    pub fn from_rig(rig: &Rig) -> Self {
-        RigParams {
-            angles: rig.relative_angles,
-            base: rig.base_m,
-        }
-    }
-
-    pub fn to_array(&self) -> [f64; 6] {
-        let [a, b, c] = self.angles;
-        let [x, y, z] = self.base;
-        [a, b, c, x, y, z]
-    }
-
-    pub fn from_array(p: &[f64; 6]) -> Self {
-        RigParams {
-            angles: [p[0], p[1], p[2]],
-            base: [p[3], p[4], p[5]],
-        }
-    }
-
-    /// Length of the base vector, metres.
-    pub fn base_length(&self) -> f64 {
-        Vector3::from(self.base).norm()
-    }
-}
 
 /// A projection through the rig with all its partial derivatives.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -130,7 +81,7 @@ pub fn corrected_focal(
 /// Projects `point` into `camera` of the rig whose left camera is at `left`.
 pub fn project_rig(
     left: &Pose,
-    rig: &RigParams,
+    rig: &RelativeOrientation,
     camera: Camera,
     focal_mm: f64,
     point: &[f64; 3],
@@ -341,17 +292,9 @@ pub fn project_epoch(
 }
 
 /// Pose of `camera` given the left pose and the rig.
-pub fn camera_pose(left: &Pose, rig: &RigParams, camera: Camera) -> Pose {
+pub fn camera_pose(left: &Pose, rig: &RelativeOrientation, camera: Camera) -> Pose {
     match camera {
         Camera::Left => *left,
-        Camera::Right => {
-            let r = Rig {
-                left: crate::camera::Interior::pinhole_px(1, 1, 1.0),
-                right: crate::camera::Interior::pinhole_px(1, 1, 1.0),
-                relative_angles: rig.angles,
-                base_m: rig.base,
-            };
-            r.right_pose(left)
-        }
+        Camera::Right => rig.right_pose(left),
     }
 }

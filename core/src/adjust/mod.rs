@@ -44,7 +44,7 @@ mod bias_tests;
 #[cfg(test)]
 mod tests;
 
-pub use geometry::{Camera, InteriorCorrections, RigParams};
+pub use geometry::InteriorCorrections;
 pub use intersection::{intersect, IntersectError, Intersection, Ray};
 pub use resection::{resect, Correspondence, ResectionConfig, ResectionError, ResectionResult};
 pub use window::{

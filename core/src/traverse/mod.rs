@@ -38,11 +38,9 @@ pub use window_view::WindowObservation;
 
 use crate::adjust::geometry::camera_pose;
 use crate::adjust::quality::chi2_quantile;
-use crate::adjust::{
-    intersect, resect, AdjustError, Camera, Correspondence, Observation, Ray, Window,
-};
+use crate::adjust::{intersect, resect, AdjustError, Correspondence, Observation, Ray, Window};
 use crate::budget::{Arena, OutOfMemory};
-use crate::camera::{angles_from_rotation, Pose};
+use crate::camera::{angles_from_rotation, Camera, Pose};
 use crate::features::FeatureSet;
 use crate::image::ImageView;
 use crate::matching::refine::{
@@ -318,7 +316,7 @@ impl<'a> Traverse<'a> {
 
     /// The rig as the adjustment has it (the calibration when it is not estimated)
     /// and its standard deviations (zero when fixed).
-    pub fn rig_estimate(&self) -> (crate::adjust::RigParams, [f64; 6]) {
+    pub fn rig_estimate(&self) -> (crate::camera::RelativeOrientation, [f64; 6]) {
         (self.window.rig(), self.window.rig_std())
     }
 

@@ -2,7 +2,7 @@
 //! described in files (docs/block-format.md), with the core's window.
 use crate::block::{adjust, Adjusted, Block};
 use anyhow::{Context, Result};
-use phototraverse_core::adjust::geometry::Camera;
+use phototraverse_core::camera::Camera;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 

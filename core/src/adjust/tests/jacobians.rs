@@ -16,7 +16,7 @@ fn rig_projection_jacobians_match_central_differences() {
             rng.uniform(-1.0, 1.0),
             rng.uniform(0.0, 2.0),
         ]);
-        let rig = RigParams {
+        let rig = RelativeOrientation {
             angles: [
                 rng.uniform(-0.05, 0.05),
                 rng.uniform(-0.05, 0.05),
@@ -47,7 +47,9 @@ fn rig_projection_jacobians_match_central_differences() {
             continue;
         };
         let h = 1e-6;
-        let proj = |l: &Pose, r: &RigParams, p: &[f64; 3]| project_rig(l, r, cam, f, p).unwrap().xy;
+        let proj = |l: &Pose, r: &RelativeOrientation, p: &[f64; 3]| {
+            project_rig(l, r, cam, f, p).unwrap().xy
+        };
         for i in 0..6 {
             let mut a = left.to_params();
             let mut b = left.to_params();
@@ -70,8 +72,8 @@ fn rig_projection_jacobians_match_central_differences() {
             ra[i] += h;
             rb[i] -= h;
             let (pa, pb) = (
-                proj(&left, &RigParams::from_array(&ra), &point),
-                proj(&left, &RigParams::from_array(&rb), &point),
+                proj(&left, &RelativeOrientation::from_array(&ra), &point),
+                proj(&left, &RelativeOrientation::from_array(&rb), &point),
             );
             for c in 0..2 {
                 let num = (pa[c] - pb[c]) / (2.0 * h);
@@ -129,7 +131,7 @@ fn rig_projection_jacobians_match_central_differences() {
 fn fewer_partials_give_the_same_projection_and_point_partials() {
     use super::geometry::{project_epoch, right_rotation, EpochRotations, Partials, Rotations};
     let left = Pose::from_params(&[1.55, 0.04, -0.1, 0.3, -0.2, 1.1]);
-    let rig = RigParams {
+    let rig = RelativeOrientation {
         angles: [0.01, -0.02, 0.005],
         base: [0.5, 0.01, -0.02],
     };

@@ -5,11 +5,12 @@
 extern crate std;
 
 use super::constraints::{base_length, distance, prior_residual, smoothness, wrap_angle};
-use super::geometry::{project_rig, Camera, RigParams};
+use super::geometry::project_rig;
 use super::quality::{chi2_quantile, ChiSquareTest};
 use super::*;
 use crate::budget::{Arena, MemoryBudget};
 use crate::camera::{project, DistortionModel, Interior, Pose, Rig};
+use crate::camera::{Camera, RelativeOrientation};
 use nalgebra::Vector3;
 use std::vec;
 use std::vec::Vec;
@@ -98,7 +99,7 @@ pub(crate) fn scene(seed: u64, epochs: usize, n_points: usize, gross: f64) -> Sc
         let mut seen = Vec::new();
         for (e, pose) in poses.iter().enumerate() {
             for cam in [Camera::Left, Camera::Right] {
-                let rp = RigParams::from_rig(&rig);
+                let rp = RelativeOrientation::from_rig(&rig);
                 if let Ok(pr) = project_rig(pose, &rp, cam, 8.0, &p) {
                     let depth_ok = (pose.to_camera(&p)[2]) < -3.0;
                     if pr.xy[0].abs() < half[0] && pr.xy[1].abs() < half[1] && depth_ok {

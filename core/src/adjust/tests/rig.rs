@@ -30,7 +30,7 @@ fn perturbed_rig_is_recovered_and_survives_slides() {
     let mut arena = Arena::new(&mut mem);
     let mut w = Window::new(cfg, &start, &mut arena).unwrap();
     w.set_base_length(s.rig.base_length());
-    let truth = RigParams::from_rig(&s.rig).to_array();
+    let truth = RelativeOrientation::from_rig(&s.rig).to_array();
     let wt = 1.0 / (SIGMA_MM * SIGMA_MM);
     let mut ids = vec![u32::MAX; s.points.len()];
     let mut first_full_std = None;
@@ -148,7 +148,14 @@ fn solve_with_right_error(
     estimate_rig: bool,
     self_calibration: Option<InteriorSigmas>,
     right: impl Fn([f64; 2]) -> [f64; 2],
-) -> (RigParams, [f64; 6], InteriorCorrections, [f64; 6], f64, f64) {
+) -> (
+    RelativeOrientation,
+    [f64; 6],
+    InteriorCorrections,
+    [f64; 6],
+    f64,
+    f64,
+) {
     let cfg = AdjustConfig {
         window: s.poses.len(),
         max_points: s.points.len(),
@@ -186,7 +193,7 @@ fn right_principal_point_error_is_absorbed_by_the_rig_phi() {
     let shift = |xy: [f64; 2]| [xy[0] + PIXEL_MM, xy[1]];
     // The equivalent angle: the shift over d(xc)/d(phi) at the right image's centre.
     let left = s.poses[0];
-    let rp = RigParams::from_rig(&s.rig);
+    let rp = RelativeOrientation::from_rig(&s.rig);
     let right_pose = geometry::camera_pose(&left, &rp, Camera::Right);
     let ahead =
         right_pose.centre_vec() + right_pose.rotation().transpose() * Vector3::new(0.0, 0.0, -10.0);
@@ -248,7 +255,7 @@ fn right_focal_error_is_absorbed_by_the_self_calibration() {
         isd[5]
     );
     assert!(sigma0 < 1.15, "sigma0 {sigma0}");
-    let truth = RigParams::from_rig(&s.rig).to_array();
+    let truth = RelativeOrientation::from_rig(&s.rig).to_array();
     let est = rig.to_array();
     for i in 0..6 {
         assert!(
@@ -278,7 +285,7 @@ struct HeldRun {
     dof: usize,
     /// RMS error of the points against the truth, metres.
     rms: f64,
-    rig: RigParams,
+    rig: RelativeOrientation,
     interior: InteriorCorrections,
 }
 

@@ -242,7 +242,7 @@ fn estimated_rig_and_sliding_window_stay_within_three_sigma() {
         }
         let rs = w.rig_std();
         let est = w.rig().to_array();
-        let truth = RigParams::from_rig(&s.rig).to_array();
+        let truth = RelativeOrientation::from_rig(&s.rig).to_array();
         for i in 0..6 {
             n += 1;
             ok += ((est[i] - truth[i]).abs() <= 3.0 * rs[i]) as usize;
@@ -345,7 +345,7 @@ fn degenerate_input_errors_or_flags_never_panics() {
         let mut w = Window::new(cfg, &s.rig, &mut arena).unwrap();
         w.add_epoch(&s.poses[0], 0.0).unwrap();
         w.add_epoch(&s.poses[1], 0.2).unwrap();
-        let rp = RigParams::from_rig(&s.rig);
+        let rp = RelativeOrientation::from_rig(&s.rig);
         for k in 0..30 {
             let pt = [-3.0 + 0.2 * k as f64, 15.0, 1.0];
             let id = w.add_point(pt).unwrap();

@@ -24,7 +24,7 @@ impl<'a> Window<'a> {
         let scratch = arena.alloc_slice::<BlockScratch>(w + cfg.extra_blocks())?;
         let touched = arena.alloc_slice::<u32>(w + cfg.extra_blocks())?;
         let residuals = arena.alloc_slice::<f64>(o)?;
-        let r = RigParams::from_rig(rig);
+        let r = RelativeOrientation::from_rig(rig);
         Ok(Window {
             cfg,
             rig: r,

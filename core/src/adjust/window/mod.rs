@@ -25,12 +25,12 @@ use super::cholesky;
 use super::constraints::{base_length, distance, prior_residual, smoothness};
 use super::geometry::{
     corrected_focal, project_epoch, project_xy, project_xy_with, right_rotation,
-    shift_principal_point, with_interior, Camera, EpochRotations, InteriorCorrections, Partials,
-    RigParams, Rotations,
+    shift_principal_point, with_interior, EpochRotations, InteriorCorrections, Partials, Rotations,
 };
 use super::quality::ChiSquareTest;
 use super::weighting::{cauchy_factor, median_by_rank, CHI2_2_MEDIAN, SEED_REWEIGHT};
 use crate::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget, OutOfMemory};
+use crate::camera::{Camera, RelativeOrientation};
 use crate::camera::{Pose, Rig};
 use bytemuck::{Pod, Zeroable};
 use nalgebra::{Matrix3, Vector3};
@@ -499,8 +499,8 @@ struct PointBlocks {
 /// The sliding window: epochs, points, observations and the solver's buffers.
 pub struct Window<'a> {
     cfg: AdjustConfig,
-    rig: RigParams,
-    rig_prior: RigParams,
+    rig: RelativeOrientation,
+    rig_prior: RelativeOrientation,
     /// Information of the rig prior: the calibration sigmas at first, the
     /// marginal information of the estimate after a slide.
     rig_prior_info: [f64; 36],

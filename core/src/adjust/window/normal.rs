@@ -314,7 +314,7 @@ impl<'a> Window<'a> {
             for (i, ri) in r.iter_mut().enumerate() {
                 *ri += self.rhs[6 * rb + i];
             }
-            self.rig = RigParams::from_array(&r);
+            self.rig = RelativeOrientation::from_array(&r);
         }
         if let Some(ib) = self.interior_block() {
             for i in 0..6 {
@@ -724,7 +724,7 @@ impl<'a> Window<'a> {
         if let Some(rb) = self.rig_block() {
             let mut r = [0.0; 6];
             r.copy_from_slice(&self.saved_cam[6 * rb..6 * rb + 6]);
-            self.rig = RigParams::from_array(&r);
+            self.rig = RelativeOrientation::from_array(&r);
         }
         if let Some(ib) = self.interior_block() {
             self.interior

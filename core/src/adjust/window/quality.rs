@@ -258,7 +258,7 @@ impl<'a> Window<'a> {
         for (r, d) in rig.iter_mut().zip(test.rig) {
             *r += d;
         }
-        let rig = RigParams::from_array(&rig);
+        let rig = RelativeOrientation::from_array(&rig);
         let rig_rot = Rotations::new(rig.angles[0], rig.angles[1], rig.angles[2]);
         let mut interior = self.interior;
         for (i, d) in interior.iter_mut().zip(test.interior) {
@@ -277,11 +277,12 @@ impl<'a> Window<'a> {
             } else {
                 Camera::Right
             };
-            let project = |rig: &RigParams, rig_rot: &Rotations, interior: &InteriorCorrections| {
-                let f = corrected_focal(self.focal, cam, interior);
-                project_xy(rot.left, &c, rig_rot, &rig.base, cam, f, &pt.xyz)
-                    .map(|xy| shift_principal_point(xy, cam, interior))
-            };
+            let project =
+                |rig: &RelativeOrientation, rig_rot: &Rotations, interior: &InteriorCorrections| {
+                    let f = corrected_focal(self.focal, cam, interior);
+                    project_xy(rot.left, &c, rig_rot, &rig.base, cam, f, &pt.xyz)
+                        .map(|xy| shift_principal_point(xy, cam, interior))
+                };
             let before = project(&self.rig, &self.rig_rot, &self.interior);
             let after = project(&rig, &rig_rot, &interior);
             if let (Some(a), Some(b)) = (before, after) {
@@ -303,7 +304,7 @@ impl<'a> Window<'a> {
         for (ri, d) in r.iter_mut().zip(test.rig) {
             *ri += d;
         }
-        self.rig = RigParams::from_array(&r);
+        self.rig = RelativeOrientation::from_array(&r);
         for (i, d) in self.interior.iter_mut().zip(test.interior) {
             *i += d;
         }

@@ -141,7 +141,7 @@ impl<'a> Window<'a> {
             .unwrap_or(true)
     }
 
-    pub fn rig(&self) -> RigParams {
+    pub fn rig(&self) -> RelativeOrientation {
         self.rig
     }
 

@@ -142,7 +142,7 @@ impl<'a> Window<'a> {
                 &mut prior,
                 &mut self.rig_prior_info,
             );
-            self.rig_prior = RigParams::from_array(&prior);
+            self.rig_prior = RelativeOrientation::from_array(&prior);
         }
         if self.cfg.self_calibration.is_some() {
             carry_prior(

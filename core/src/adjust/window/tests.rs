@@ -58,7 +58,7 @@ fn constraint_normal_equations_match_numerical_gradient() {
     // Move away from the priors so every residual is non-zero.
     w.epochs[0].params[0] += 0.001;
     w.epochs[0].params[4] += 0.002;
-    w.rig = RigParams::from_array(&[0.012, -0.018, 0.004, 0.51, 0.012, -0.019]);
+    w.rig = RelativeOrientation::from_array(&[0.012, -0.018, 0.004, 0.51, 0.012, -0.019]);
     w.interior = [0.003, -0.002, 0.01, -0.004, 0.001, -0.02];
     assert_rhs_is_the_numerical_gradient(&mut w);
 }
@@ -79,7 +79,7 @@ fn assert_rhs_is_the_numerical_gradient(w: &mut Window) {
             } else if Some(blk) == w.rig_block() {
                 let mut r = w.rig.to_array();
                 r[k] += d;
-                w.rig = RigParams::from_array(&r);
+                w.rig = RelativeOrientation::from_array(&r);
             } else {
                 w.interior[k] += d;
             }
@@ -188,7 +188,7 @@ fn schur_step_zeroes_the_numerical_gradient() {
     let mut r = w.rig.to_array();
     r[1] += 1e-4;
     r[3] += 2e-3;
-    w.rig = RigParams::from_array(&r);
+    w.rig = RelativeOrientation::from_array(&r);
     w.interior[1] += 4e-4;
     w.interior[5] -= 2e-3;
     for p in 0..w.n_point_slots {
@@ -205,7 +205,7 @@ fn schur_step_zeroes_the_numerical_gradient() {
                 } else if i < 6 * w.n_epochs + 6 {
                     let mut r = w.rig.to_array();
                     r[i - 6 * w.n_epochs] += d;
-                    w.rig = RigParams::from_array(&r);
+                    w.rig = RelativeOrientation::from_array(&r);
                 } else if i < n_cam {
                     w.interior[i - 6 * w.n_epochs - 6] += d;
                 } else {

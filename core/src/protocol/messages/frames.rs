@@ -2,25 +2,11 @@
 //! then GNSS and odometer.
 use super::*;
 
-/// Camera of a stereo pair.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u8)]
-pub enum Camera {
-    Left = 0,
-    Right = 1,
-}
+pub use crate::camera::Camera;
 
-impl Camera {
-    fn parse(b: u8) -> Result<Self, ParseError> {
-        match b {
-            0 => Ok(Camera::Left),
-            1 => Ok(Camera::Right),
-            _ => Err(ParseError::Invalid("camera")),
-        }
-    }
-    pub fn index(self) -> usize {
-        self as usize
-    }
+/// The camera of a wire code (its `repr(u8)` value).
+fn parse_camera(b: u8) -> Result<Camera, ParseError> {
+    Camera::from_index(b).ok_or(ParseError::Invalid("camera"))
 }
 
 /// Pixel format of a frame.
@@ -71,7 +57,7 @@ repr!(
     FrameBegin,
     |r| {
         let epoch = r.u32()?;
-        let camera = Camera::parse(r.u8()?)?;
+        let camera = parse_camera(r.u8()?)?;
         let (code, bits) = (r.u8()?, r.u8()?);
         let format = match code {
             0 => PixelFormat::Gray8,
@@ -124,7 +110,7 @@ repr!(
     |r| {
         Ok(FrameChunk {
             epoch: r.u32()?,
-            camera: Camera::parse(r.u8()?)?,
+            camera: parse_camera(r.u8()?)?,
             offset: r.u32()?,
             data: r.rest(),
         })
@@ -151,7 +137,7 @@ repr!(
     |r| {
         Ok(FrameEnd {
             epoch: r.u32()?,
-            camera: Camera::parse(r.u8()?)?,
+            camera: parse_camera(r.u8()?)?,
             total_bytes: r.u32()?,
             crc32: r.u32()?,
         })
