@@ -9,144 +9,19 @@
 //!
 //! `... --bench adjust_window -- --sweep` runs the accuracy sweep (2..20 epochs,
 //! 50..500 points, clean and with 10 % blunders of 10..50 px) and prints the bars.
-use phototraverse_core::adjust::geometry::project_rig;
 use phototraverse_core::adjust::{AdjustConfig, Observation, Robust, Window};
 use phototraverse_core::budget::{Arena, MemoryBudget};
-use phototraverse_core::camera::{Camera, RelativeOrientation};
-use phototraverse_core::camera::{DistortionModel, Interior, Pose, Rig};
+use phototraverse_core::camera::{Pose, RelativeOrientation};
+use phototraverse_core::testkit::{
+    drive, Drive as Scene, DriveObservation, Rng, FOCAL_MM as FOCAL, SIGMA_MM,
+};
 use std::fmt::Write as _;
 use std::time::Instant;
 
-const PIXEL_MM: f64 = 0.005;
-const SIGMA_MM: f64 = 0.3 * PIXEL_MM;
-const FOCAL: f64 = 8.0;
-
-struct Rng(u64);
-impl Rng {
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        lo + (hi - lo) * ((self.0 >> 11) as f64 / (1u64 << 53) as f64)
-    }
-    fn normal(&mut self) -> f64 {
-        let u1 = self.uniform(1e-12, 1.0);
-        let u2 = self.uniform(0.0, 1.0);
-        (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
-    }
-}
-
-struct Scene {
-    rig: Rig,
-    poses: Vec<Pose>,
-    points: Vec<[f64; 3]>,
-    /// (epoch, camera, point, observed xy, blunder)
-    obs: Vec<(usize, u8, usize, [f64; 2], bool)>,
-}
-
-fn rig() -> Rig {
-    let cam = Interior {
-        width_px: 1280,
-        height_px: 960,
-        pixel_size_mm: [PIXEL_MM, PIXEL_MM],
-        focal_mm: FOCAL,
-        principal_point_mm: [0.0, 0.0],
-        radial: [0.0, 0.0, 0.0],
-        decentering: [0.0, 0.0],
-        distortion_model: DistortionModel::Correction,
-    };
-    let mut rig = Rig::rectified(cam, 0.5);
-    rig.relative_angles = [0.002, -0.004, 0.001];
-    rig.base_m = [0.5, 0.003, -0.002];
-    rig
-}
-
-/// Random drive; `span` = epochs a point is seen in (0: as long as it is visible).
+/// The test kit's drive; `span` = epochs a point is seen in (0: as long as it is
+/// visible).
 fn scene(seed: u64, epochs: usize, n_points: usize, gross: f64, span: usize) -> Scene {
-    let mut rng = Rng(seed);
-    let rig = rig();
-    let rp = RelativeOrientation::from_rig(&rig);
-    let mut poses = Vec::new();
-    let (mut x, mut y) = (0.0, 0.0);
-    for k in 0..epochs {
-        if k > 0 {
-            y += rng.uniform(0.8, 1.2);
-            x += rng.uniform(-0.1, 0.1);
-        }
-        poses.push(Pose::from_degrees(
-            90.0 + rng.uniform(-2.0, 2.0),
-            rng.uniform(-2.0, 2.0),
-            rng.uniform(-2.0, 2.0),
-            [x, y, 1.5 + rng.uniform(-0.05, 0.05)],
-        ));
-    }
-    let mut points = Vec::new();
-    let mut obs = Vec::new();
-    while points.len() < n_points {
-        let p = [
-            rng.uniform(-8.0, 8.0),
-            rng.uniform(4.0, y + 25.0),
-            rng.uniform(-1.0, 6.0),
-        ];
-        let first = if span > 0 {
-            rng.below(epochs + 1 - span)
-        } else {
-            0
-        };
-        let last = if span > 0 { first + span } else { epochs };
-        let mut seen = Vec::new();
-        for (e, pose) in poses.iter().enumerate().take(last).skip(first) {
-            for cam in [Camera::Left, Camera::Right] {
-                if let Ok(pr) = project_rig(pose, &rp, cam, FOCAL, &p) {
-                    if pr.xy[0].abs() < 3.19
-                        && pr.xy[1].abs() < 2.39
-                        && pose.to_camera(&p)[2] < -3.0
-                    {
-                        seen.push((e, cam as u8, pr.xy));
-                    }
-                }
-            }
-        }
-        let mut eps: Vec<usize> = seen.iter().map(|s| s.0).collect();
-        eps.dedup();
-        let complete = if span > 0 {
-            seen.len() == 2 * span
-        } else {
-            eps.len() >= 2 && seen.len() >= 4
-        };
-        if !complete {
-            continue;
-        }
-        let id = points.len();
-        points.push(p);
-        for (e, c, xy) in seen {
-            let mut m = [
-                xy[0] + SIGMA_MM * rng.normal(),
-                xy[1] + SIGMA_MM * rng.normal(),
-            ];
-            let blunder = rng.uniform(0.0, 1.0) < gross;
-            if blunder {
-                let mag = rng.uniform(10.0, 50.0) * PIXEL_MM;
-                let ang = rng.uniform(0.0, 2.0 * std::f64::consts::PI);
-                m[0] += mag * ang.cos();
-                m[1] += mag * ang.sin();
-            }
-            obs.push((e, c, id, m, blunder));
-        }
-    }
-    Scene {
-        rig,
-        poses,
-        points,
-        obs,
-    }
-}
-
-impl Rng {
-    fn below(&mut self, n: usize) -> usize {
-        (self.uniform(0.0, n as f64) as usize).min(n - 1)
-    }
+    drive(seed, epochs, n_points, gross, span)
 }
 
 /// Perturbed start values (the same for Rust and scipy).
@@ -200,9 +75,15 @@ fn load<'a>(
             .map(|p| w.add_point(*p).expect("point"))
             .collect();
     let wt = 1.0 / (SIGMA_MM * SIGMA_MM);
-    for (e, c, p, xy, _) in &s.obs {
-        let cam = if *c == 0 { Camera::Left } else { Camera::Right };
-        w.add_observation(Observation::new(*e as u32, cam, ids[*p], *xy, [wt, wt]))
+    for DriveObservation {
+        epoch: e,
+        camera: cam,
+        point: p,
+        xy,
+        ..
+    } in &s.observations
+    {
+        w.add_observation(Observation::new(*e as u32, *cam, ids[*p], *xy, [wt, wt]))
             .expect("obs");
     }
     (w, ids)
@@ -232,7 +113,7 @@ fn window_update(out: &std::path::Path) {
     let cfg = AdjustConfig {
         window: 8,
         max_points: 300,
-        max_observations: s.obs.len(),
+        max_observations: s.observations.len(),
         robust: Robust::None,
         ..AdjustConfig::default()
     };
@@ -284,9 +165,20 @@ fn window_update(out: &std::path::Path) {
     .unwrap();
     let wt = 1.0 / (SIGMA_MM * SIGMA_MM);
     let ob: Vec<f64> = s
-        .obs
+        .observations
         .iter()
-        .flat_map(|(e, c, p, xy, _)| [*e as f64, *c as f64, *p as f64, xy[0], xy[1], wt, wt])
+        .flat_map(|o| {
+            let [x, y] = o.xy;
+            [
+                o.epoch as f64,
+                o.camera.index() as f64,
+                o.point as f64,
+                x,
+                y,
+                wt,
+                wt,
+            ]
+        })
         .collect();
     write!(pj, "\"observations\":{}}}", json_array(&ob)).unwrap();
     std::fs::write(out.join("problem.json"), pj).expect("write problem");
@@ -308,7 +200,7 @@ fn window_update(out: &std::path::Path) {
     std::fs::write(out.join("solution.json"), sj).expect("write solution");
     println!(
         "window update (8 epochs, 300 points, {} observations): median {:.3} ms over {reps} runs, {} iterations, sigma0 {:.4}; memory {} B predicted, {} B used",
-        s.obs.len(),
+        s.observations.len(),
         median * 1e3,
         r.iterations,
         r.sigma0,
@@ -343,7 +235,7 @@ fn sweep() {
                 let cfg = AdjustConfig {
                     window: epochs,
                     max_points: points,
-                    max_observations: s.obs.len(),
+                    max_observations: s.observations.len(),
                     ..AdjustConfig::default()
                 };
                 let mut mem = vec![0u8; budget(&cfg)];
@@ -379,7 +271,7 @@ fn sweep() {
                 }
                 let (mut b, mut c, mut g, mut f) = (0, 0, 0, 0);
                 for (i, o) in w.observations().iter().enumerate() {
-                    if s.obs[i].4 {
+                    if s.observations[i].blunder {
                         b += 1;
                         c += o.is_flagged() as usize;
                     } else {

@@ -20,4 +20,6 @@ pub mod image;
 pub mod matching;
 pub mod protocol;
 pub mod sift;
+#[cfg(any(test, feature = "testkit"))]
+pub mod testkit;
 pub mod traverse;

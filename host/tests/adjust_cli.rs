@@ -1,6 +1,9 @@
 //! End-to-end tests of `phototraverse adjust` on the example block
 //! (examples/block, a synthetic block with known truth and 10 % blunders).
-use phototraverse_host::block::{synthetic_block, Block};
+use phototraverse_core::camera::{Camera, Pose};
+use phototraverse_core::testkit::{drive, Rng};
+use phototraverse_host::block::{Block, Image, PixelObservation, Settings};
+use std::f64::consts::TAU;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -8,9 +11,69 @@ fn example_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../examples/block")
 }
 
-/// The generator behind examples/block: 4 epochs, 60 points, every 10th observation a blunder.
-fn example() -> (Block, Vec<phototraverse_core::camera::Pose>) {
-    synthetic_block(2026, 4, 60, 10)
+/// The block of examples/block: the test kit's drive (4 epochs, 60 points) in
+/// pixels of the test rig, every 10th observation moved by 10..50 px, starting
+/// from orientations a few cm and tenths of a degree off. Also the true left poses
+/// and the observations.txt line numbers of the blunders (one comment line comes
+/// first).
+fn example() -> (Block, Vec<Pose>, Vec<usize>) {
+    let d = drive(2026, 4, 60, 0.0, 0);
+    let mut rng = Rng(7);
+    let mut blunder_lines = Vec::new();
+    let observations = d
+        .observations
+        .iter()
+        .enumerate()
+        .map(|(k, o)| {
+            let cam = match o.camera {
+                Camera::Left => &d.rig.left,
+                Camera::Right => &d.rig.right,
+            };
+            let mut px = cam.corrected_to_pixel(o.xy[0], o.xy[1]).unwrap();
+            if (k + 1) % 10 == 0 {
+                let (size, angle) = (rng.uniform(10.0, 50.0), rng.uniform(0.0, TAU));
+                px[0] += size * angle.cos();
+                px[1] += size * angle.sin();
+                blunder_lines.push(k + 2);
+            }
+            PixelObservation {
+                line: 0,
+                point: 100 + o.point as u64,
+                epoch: o.epoch as u32,
+                camera: o.camera,
+                px,
+            }
+        })
+        .collect();
+    let images = d
+        .poses
+        .iter()
+        .enumerate()
+        .map(|(k, t)| {
+            let mut q = t.to_params();
+            if k > 0 {
+                for (i, qi) in q.iter_mut().enumerate() {
+                    let off = if i < 3 { 0.005 } else { 0.05 };
+                    *qi += rng.uniform(-off, off);
+                }
+            }
+            Image {
+                epoch: k as u32,
+                time_s: 0.2 * k as f64,
+                pose: Pose::from_params(&q),
+            }
+        })
+        .collect();
+    let block = Block {
+        rig: d.rig,
+        settings: Settings::default(),
+        images,
+        observations,
+        control: Vec::new(),
+        gnss: Vec::new(),
+        odometer: Vec::new(),
+    };
+    (block, d.poses, blunder_lines)
 }
 
 fn run(block: &Path, out: &Path) -> std::process::Output {
@@ -26,7 +89,7 @@ fn run(block: &Path, out: &Path) -> std::process::Output {
 #[test]
 fn example_block_is_what_the_generator_writes() {
     let tmp = tempfile::tempdir().unwrap();
-    let (block, _) = example();
+    let (block, _, _) = example();
     block.write(tmp.path()).unwrap();
     if std::env::var_os("PHOTOTRAVERSE_UPDATE_EXAMPLE").is_some() {
         block.write(&example_dir()).unwrap();
@@ -60,22 +123,15 @@ fn adjust_cli_recovers_the_truth_and_flags_the_blunders() {
     let sigma0 = report["sigma0"].as_f64().unwrap();
     assert!((sigma0 - 1.0).abs() < 0.15, "sigma0 {sigma0}");
     assert_eq!(report["chi_square"]["passed"], true);
-    // Every 10th observation was a blunder: all flagged, few others.
-    let (block, truth) = example();
-    let blunders: Vec<usize> = (1..=block.observations.len())
-        .filter(|k| k % 10 == 0)
-        .collect();
+    // The blunders: all flagged, few others.
+    let (block, truth, blunders) = example();
     let flagged = std::fs::read_to_string(tmp.path().join("flagged.csv")).unwrap();
     let lines: Vec<usize> = flagged
         .lines()
         .skip(1)
         .map(|l| l.split(',').next().unwrap().parse().unwrap())
         .collect();
-    // Line numbers in observations.txt: one comment line first.
-    let caught = blunders
-        .iter()
-        .filter(|k| lines.contains(&(**k + 1)))
-        .count();
+    let caught = blunders.iter().filter(|k| lines.contains(k)).count();
     assert!(
         caught as f64 >= 0.95 * blunders.len() as f64,
         "caught {caught}/{}",
@@ -130,7 +186,7 @@ fn adjust_cli_recovers_the_truth_and_flags_the_blunders() {
 fn invalid_block_is_refused_naming_file_and_line() {
     let tmp = tempfile::tempdir().unwrap();
     let blk = tmp.path().join("blk");
-    let (block, _) = example();
+    let (block, _, _) = example();
     block.write(&blk).unwrap();
     let obs = std::fs::read_to_string(blk.join("observations.txt")).unwrap();
     let mut lines: Vec<String> = obs.lines().map(str::to_string).collect();
@@ -186,7 +242,7 @@ mod parser_properties {
         #[test]
         fn any_observation_line_is_read_or_refused_with_its_line(line in "[ -~]{0,40}", at in 0usize..20) {
             let tmp = tempfile::tempdir().unwrap();
-            let (block, _) = example();
+            let (block, _, _) = example();
             block.write(tmp.path()).unwrap();
             let path = tmp.path().join("observations.txt");
             let text = std::fs::read_to_string(&path).unwrap();
@@ -203,7 +259,7 @@ mod parser_properties {
         #[test]
         fn any_block_line_is_read_or_refused(line in "[a-z_]{1,14}( [-0-9.e]{1,8}){0,12}") {
             let tmp = tempfile::tempdir().unwrap();
-            let (block, _) = example();
+            let (block, _, _) = example();
             block.write(tmp.path()).unwrap();
             let path = tmp.path().join("block.txt");
             let mut text = std::fs::read_to_string(&path).unwrap();

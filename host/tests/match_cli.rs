@@ -1,7 +1,7 @@
 //! End-to-end tests of `phototraverse match`: the real Motorcycle crop with its ground
 //! truth (our extractor, NCC refinement on and off), a general rig read from rig.toml
 //! with synthetic features of known truth, and bad input.
-use phototraverse_core::camera::{project_to_pixel, DistortionModel, Interior, Pose, Rig};
+use phototraverse_core::camera::{project_to_pixel, Pose, Rig};
 use phototraverse_core::features::{Descriptor, Keypoint};
 use phototraverse_core::matching::synthetic::{SyntheticScene, DISTRACTOR};
 use phototraverse_host::dataset::write_rig;
@@ -116,16 +116,7 @@ fn write_features(path: &Path, kps: &[Keypoint], desc: &[Descriptor]) {
 #[test]
 fn general_rig_from_rig_toml() {
     let dir = tempfile::tempdir().unwrap();
-    let cam = Interior {
-        width_px: 640,
-        height_px: 480,
-        pixel_size_mm: [0.01, 0.01],
-        focal_mm: 5.0,
-        principal_point_mm: [0.05, -0.03],
-        radial: [-4e-3, 2e-5, 0.0],
-        decentering: [3e-4, -2e-4],
-        distortion_model: DistortionModel::Correction,
-    };
+    let cam = phototraverse_core::testkit::test_camera();
     let rig = Rig {
         left: cam,
         right: cam,
@@ -147,7 +138,7 @@ fn general_rig_from_rig_toml() {
             &desc[..n],
         );
         ids[side].truncate(n);
-        image::GrayImage::new(640, 480)
+        image::GrayImage::new(cam.width_px, cam.height_px)
             .save(dir.path().join(format!("{name}.png")))
             .unwrap();
     }

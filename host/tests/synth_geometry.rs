@@ -1,7 +1,7 @@
 //! The renderer's geometry: small discs at known 3D points render within
 //! 0.1 px of their collinearity projection, with and without distortion; and
 //! depth maps give true correspondences between the two cameras.
-use phototraverse_core::camera::{project_to_pixel, DistortionModel, Interior, Pose, Rig};
+use phototraverse_core::camera::{project_to_pixel, Interior, Pose, Rig};
 use phototraverse_host::synth::geometry::{Shape, V3};
 use phototraverse_host::synth::material::Material;
 use phototraverse_host::synth::render::{render, RenderSettings};
@@ -9,16 +9,7 @@ use phototraverse_host::synth::scene::{Primitive, Scene};
 
 /// Seed 000 Quadro 1, left camera.
 fn seed_left() -> Interior {
-    Interior {
-        width_px: 576,
-        height_px: 384,
-        pixel_size_mm: [0.0387, 0.0387],
-        focal_mm: 34.6041,
-        principal_point_mm: [0.4171, -0.3096],
-        radial: [-3.3147e-05, 1.30582e-07, 0.0],
-        decentering: [9.086e-05, -7.7278e-05],
-        distortion_model: DistortionModel::Correction,
-    }
+    phototraverse_host::synth::scenes::seed000_rig().left
 }
 
 /// Renders discs at a grid of known points and returns the largest distance
@@ -79,16 +70,8 @@ fn max_disc_error(cam: &Interior, pose: &Pose, radius_px: f64) -> (f64, usize) {
 
 #[test]
 fn discs_render_at_their_projection_without_distortion() {
-    let cam = Interior {
-        width_px: 640,
-        height_px: 480,
-        pixel_size_mm: [0.01, 0.01],
-        focal_mm: 5.0,
-        principal_point_mm: [0.0; 2],
-        radial: [0.0; 3],
-        decentering: [0.0; 2],
-        distortion_model: DistortionModel::Correction,
-    };
+    // 640 x 480 pixels, f = 500 px.
+    let cam = Interior::pinhole_px(640, 480, 500.0);
     let pose = Pose::from_degrees(91.3, -2.0, 4.0, [1.0, -3.0, 1.6]);
     let (err, n) = max_disc_error(&cam, &pose, 3.0);
     println!("pinhole 640x480: max centroid error {err:.4} px over {n} discs");

@@ -17,6 +17,7 @@ pub mod refine;
 pub mod search;
 pub mod spread;
 pub mod stereo;
+#[cfg(any(test, feature = "testkit"))]
 pub mod synthetic;
 pub mod temporal;
 pub mod tracks;

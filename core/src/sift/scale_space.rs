@@ -86,8 +86,8 @@ pub fn convolve(rows: &[&[i16]], taps: &[i32], radius: usize, acc: &mut [i32], o
     }
     #[cfg(target_arch = "x86_64")]
     let done = {
-        // SAFETY (both): the CPU has the feature (checked at run time); rows are
-        // checked above.
+        // SAFETY (all three): the CPU has the feature (checked at run time; SSE2 is
+        // the x86_64 baseline); the rows' count and lengths are checked above.
         let mut start = 0;
         if simd::has_avx512() {
             start = unsafe { simd::convolve_avx512(rows, taps, radius, out, start) };
@@ -95,7 +95,7 @@ pub fn convolve(rows: &[&[i16]], taps: &[i32], radius: usize, acc: &mut [i32], o
         if simd::has_avx2() {
             start = unsafe { simd::convolve_avx2(rows, taps, radius, out, start) };
         }
-        simd::convolve_sse2(rows, taps, radius, out, start)
+        unsafe { simd::convolve_sse2(rows, taps, radius, out, start) }
     };
     #[cfg(not(target_arch = "x86_64"))]
     let done = 0;
@@ -178,7 +178,11 @@ mod simd {
     }
 
     /// Columns `0..w - w % 8` of [`super::convolve`]; returns how many were written.
-    pub fn convolve_sse2(
+    ///
+    /// # Safety
+    /// `rows` must hold `2 radius + 1` rows (`radius` at most [`MAX_RADIUS`]), each of
+    /// at least `out.len()` values: the loads are unchecked.
+    pub unsafe fn convolve_sse2(
         rows: &[&[i16]],
         taps: &[i32],
         radius: usize,
@@ -187,8 +191,9 @@ mod simd {
     ) -> usize {
         let radius = radius.min(MAX_RADIUS);
         let t = tap_rows(rows, radius);
-        // SAFETY (both loaders): every row holds at least `out.len()` values (checked by
-        // the caller) and `columns` loads columns `c..c + 8` with `c + 8 <= out.len()`.
+        // SAFETY (both loaders): every row holds at least `out.len()` values (this
+        // function's contract) and `columns` loads columns `c..c + 8` with
+        // `c + 8 <= out.len()`.
         let load = |c: usize| unsafe { _mm_loadu_si128(t.centre.add(c) as *const __m128i) };
         let sym = |j: usize, c: usize| unsafe {
             _mm_add_epi16(
@@ -201,7 +206,15 @@ mod simd {
 
     /// Columns `0..w - w % 8` of [`super::blur_column_u8`]: u8 rows, widened to i16
     /// on load (`l + h` fits: at most 510), then [`columns`] shifted by 14 - 6.
-    pub fn column_u8_sse2(rows: &[&[u8]], taps: &[i32], radius: usize, out: &mut [i16]) -> usize {
+    ///
+    /// # Safety
+    /// As [`convolve_sse2`]: `2 radius + 1` rows of at least `out.len()` values.
+    pub unsafe fn column_u8_sse2(
+        rows: &[&[u8]],
+        taps: &[i32],
+        radius: usize,
+        out: &mut [i16],
+    ) -> usize {
         let radius = radius.min(MAX_RADIUS);
         let t = tap_rows(rows, radius);
         // SAFETY: as in `convolve_sse2`; each load reads the 8 bytes `c..c + 8`.
@@ -434,7 +447,8 @@ pub fn blur_column_u8<'r>(
         return;
     }
     #[cfg(target_arch = "x86_64")]
-    let done = simd::column_u8_sse2(list, taps, radius, &mut out[..w]);
+    // SAFETY: `2 radius + 1` rows, each of at least `w` values (checked above).
+    let done = unsafe { simd::column_u8_sse2(list, taps, radius, &mut out[..w]) };
     #[cfg(not(target_arch = "x86_64"))]
     let done = 0;
     // Q14 taps times 2^6 fractional bits: shift by 14 - 6.

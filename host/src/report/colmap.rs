@@ -283,17 +283,11 @@ mod tests {
     use crate::report::records::ImageMeasurement;
     use phototraverse_core::camera::project_to_pixel;
 
-    /// A rig with lens distortion, converging cameras and anisotropic pixels.
+    /// The test camera with anisotropic pixels, in a converging rig.
     fn rig() -> Rig {
         let camera = Interior {
-            width_px: 640,
-            height_px: 480,
             pixel_size_mm: [0.005, 0.0052],
-            focal_mm: 4.0,
-            principal_point_mm: [0.03, -0.02],
-            radial: [-2e-3, 1e-5, 0.0],
-            decentering: [1e-5, -2e-5],
-            distortion_model: DistortionModel::Correction,
+            ..phototraverse_core::testkit::test_camera()
         };
         Rig {
             left: camera,

@@ -369,31 +369,7 @@ pub fn plan(name: &str, frames: Option<usize>, seed: u64) -> Result<ScenePlan, S
             LayoutChoice::Kitti,
         ),
         "seed2014" | "handheld" => {
-            let px = [0.0387, 0.0387];
-            let left = Interior {
-                width_px: 576,
-                height_px: 384,
-                pixel_size_mm: px,
-                focal_mm: 34.6041,
-                principal_point_mm: [0.4171, -0.3096],
-                radial: [-3.3147e-05, 1.30582e-07, 0.0],
-                decentering: [9.086e-05, -7.7278e-05],
-                distortion_model: DistortionModel::Correction,
-            };
-            let right = Interior {
-                focal_mm: 35.1727,
-                principal_point_mm: [0.2309, -0.1701],
-                radial: [-3.7141e-05, 1.77645e-07, 0.0],
-                decentering: [7.00283e-05, -1.4916e-05],
-                distortion_model: DistortionModel::Correction,
-                ..left
-            };
-            let rig = Rig {
-                left,
-                right,
-                relative_angles: [0.0, (-0.3f64).to_radians(), 0.0],
-                base_m: [0.40, 0.0, 0.0],
-            };
+            let rig = seed000_rig();
             if name == "handheld" {
                 ("handheld", rig, 100, LayoutChoice::Rig)
             } else {
@@ -607,6 +583,34 @@ impl ScenePlan {
                 .find(|(a, b, _)| k >= *a && k < *b)
                 .map_or(1.0, |e| e.2)
         })
+    }
+}
+
+/// Seed 000's Quadro 1 rig at the 576x384 format of its experiments: two cameras
+/// with their calibrated lenses, 0.40 m apart, converging by 0.3 deg.
+pub fn seed000_rig() -> Rig {
+    let left = Interior {
+        width_px: 576,
+        height_px: 384,
+        pixel_size_mm: [0.0387, 0.0387],
+        focal_mm: 34.6041,
+        principal_point_mm: [0.4171, -0.3096],
+        radial: [-3.3147e-05, 1.30582e-07, 0.0],
+        decentering: [9.086e-05, -7.7278e-05],
+        distortion_model: DistortionModel::Correction,
+    };
+    let right = Interior {
+        focal_mm: 35.1727,
+        principal_point_mm: [0.2309, -0.1701],
+        radial: [-3.7141e-05, 1.77645e-07, 0.0],
+        decentering: [7.00283e-05, -1.4916e-05],
+        ..left
+    };
+    Rig {
+        left,
+        right,
+        relative_angles: [0.0, (-0.3f64).to_radians(), 0.0],
+        base_m: [0.40, 0.0, 0.0],
     }
 }
 

@@ -9,28 +9,13 @@ use super::geometry::project_rig;
 use super::quality::{chi2_quantile, ChiSquareTest};
 use super::*;
 use crate::budget::{Arena, MemoryBudget};
-use crate::camera::{project, DistortionModel, Interior, Pose, Rig};
+use crate::camera::{project, Interior, Pose, Rig};
 use crate::camera::{Camera, RelativeOrientation};
 use nalgebra::Vector3;
 use std::vec;
 use std::vec::Vec;
 
-/// Deterministic uniform and normal numbers (no std RNG in the core).
-pub(crate) struct Rng(pub(crate) u64);
-impl Rng {
-    pub(crate) fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        lo + (hi - lo) * ((self.0 >> 11) as f64 / (1u64 << 53) as f64)
-    }
-    pub(crate) fn normal(&mut self) -> f64 {
-        let u1 = self.uniform(1e-12, 1.0);
-        let u2 = self.uniform(0.0, 1.0);
-        libm::sqrt(-2.0 * libm::log(u1)) * libm::cos(2.0 * core::f64::consts::PI * u2)
-    }
-}
+pub(crate) use crate::testkit::{DriveObservation, Rng, PIXEL_MM, SIGMA_MM};
 
 fn close(a: f64, b: f64, tol: f64) -> bool {
     (a - b).abs() <= tol * (1.0 + a.abs().max(b.abs()))
@@ -43,102 +28,11 @@ mod windows;
 
 // ---------- synthetic windows ----------
 
-pub(crate) struct Scene {
-    pub rig: Rig,
-    pub poses: Vec<Pose>,
-    pub points: Vec<[f64; 3]>,
-    /// (epoch, camera, point, xy observed, true error added beyond noise)
-    pub obs: Vec<(usize, u8, usize, [f64; 2], bool)>,
-}
+pub(crate) type Scene = crate::testkit::Drive;
 
-pub(crate) const PIXEL_MM: f64 = 0.005;
-pub(crate) const SIGMA_MM: f64 = 0.3 * PIXEL_MM;
-
-/// A random drive: `epochs` stereo pairs about 1 m apart with random attitude,
-/// `n_points` street points each seen in at least two epochs, 0.3 px noise,
-/// and a fraction `gross` of observations with a 10..50 px blunder.
+/// The test kit's drive, every point seen as long as it is visible.
 pub(crate) fn scene(seed: u64, epochs: usize, n_points: usize, gross: f64) -> Scene {
-    let mut rng = Rng(seed);
-    let cam = Interior {
-        width_px: 1280,
-        height_px: 960,
-        pixel_size_mm: [PIXEL_MM, PIXEL_MM],
-        focal_mm: 8.0,
-        principal_point_mm: [0.0, 0.0],
-        radial: [0.0, 0.0, 0.0],
-        decentering: [0.0, 0.0],
-        distortion_model: DistortionModel::Correction,
-    };
-    let mut rig = Rig::rectified(cam, 0.5);
-    rig.relative_angles = [0.002, -0.004, 0.001];
-    rig.base_m = [0.5, 0.003, -0.002];
-    let mut poses = Vec::new();
-    let mut y = 0.0;
-    let mut x = 0.0;
-    for k in 0..epochs {
-        if k > 0 {
-            y += rng.uniform(0.8, 1.2);
-            x += rng.uniform(-0.1, 0.1);
-        }
-        poses.push(Pose::from_degrees(
-            90.0 + rng.uniform(-2.0, 2.0),
-            rng.uniform(-2.0, 2.0),
-            rng.uniform(-2.0, 2.0),
-            [x, y, 1.5 + rng.uniform(-0.05, 0.05)],
-        ));
-    }
-    let half = [3.2 - 0.01, 2.4 - 0.01];
-    let mut points = Vec::new();
-    let mut obs = Vec::new();
-    while points.len() < n_points {
-        let p = [
-            rng.uniform(-8.0, 8.0),
-            rng.uniform(4.0, y + 25.0),
-            rng.uniform(-1.0, 6.0),
-        ];
-        let mut seen = Vec::new();
-        for (e, pose) in poses.iter().enumerate() {
-            for cam in [Camera::Left, Camera::Right] {
-                let rp = RelativeOrientation::from_rig(&rig);
-                if let Ok(pr) = project_rig(pose, &rp, cam, 8.0, &p) {
-                    let depth_ok = (pose.to_camera(&p)[2]) < -3.0;
-                    if pr.xy[0].abs() < half[0] && pr.xy[1].abs() < half[1] && depth_ok {
-                        seen.push((e, cam as u8, pr.xy));
-                    }
-                }
-            }
-        }
-        let epochs_seen = {
-            let mut v: Vec<usize> = seen.iter().map(|s| s.0).collect();
-            v.dedup();
-            v.len()
-        };
-        if epochs_seen < 2 || seen.len() < 4 {
-            continue;
-        }
-        let id = points.len();
-        points.push(p);
-        for (e, c, xy) in seen {
-            let mut m = [
-                xy[0] + SIGMA_MM * rng.normal(),
-                xy[1] + SIGMA_MM * rng.normal(),
-            ];
-            let blunder = rng.uniform(0.0, 1.0) < gross;
-            if blunder {
-                let mag = rng.uniform(10.0, 50.0) * PIXEL_MM;
-                let ang = rng.uniform(0.0, 2.0 * core::f64::consts::PI);
-                m[0] += mag * libm::cos(ang);
-                m[1] += mag * libm::sin(ang);
-            }
-            obs.push((e, c, id, m, blunder));
-        }
-    }
-    Scene {
-        rig,
-        poses,
-        points,
-        obs,
-    }
+    crate::testkit::drive(seed, epochs, n_points, gross, 0)
 }
 
 /// Loads a scene into a window with perturbed initial values; returns the
@@ -177,8 +71,9 @@ pub(crate) fn load<'a>(
         })
         .collect();
     let wt = 1.0 / (SIGMA_MM * SIGMA_MM);
-    for (e, c, p, xy, _) in &s.obs {
-        let cam = if *c == 0 { Camera::Left } else { Camera::Right };
+    for o in &s.observations {
+        let (e, c, p, xy) = (&o.epoch, &o.camera, &o.point, &o.xy);
+        let cam = *c;
         w.add_observation(Observation::new(*e as u32, cam, ids[*p], *xy, [wt, wt]))
             .unwrap();
     }

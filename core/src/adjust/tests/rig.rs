@@ -21,7 +21,7 @@ fn perturbed_rig_is_recovered_and_survives_slides() {
     let cfg = AdjustConfig {
         window: 4,
         max_points: 500,
-        max_observations: s.obs.len(),
+        max_observations: s.observations.len(),
         estimate_rig: true,
         sigmas: loose_rig_prior(),
         ..AdjustConfig::default()
@@ -42,7 +42,8 @@ fn perturbed_rig_is_recovered_and_survives_slides() {
             assert_eq!(w.rig(), before, "slide before epoch {k}");
         }
         w.add_epoch(&s.poses[k], 0.2 * k as f64).unwrap();
-        for (e, c, p, xy, _) in &s.obs {
+        for o in &s.observations {
+            let (e, c, p, xy) = (&o.epoch, &o.camera, &o.point, &o.xy);
             if *e != k {
                 continue;
             }
@@ -53,7 +54,7 @@ fn perturbed_rig_is_recovered_and_survives_slides() {
                     .add_point([t[0] + 0.05, t[1] - 0.05, t[2] + 0.02])
                     .unwrap();
             }
-            let cam = if *c == 0 { Camera::Left } else { Camera::Right };
+            let cam = *c;
             w.add_observation(Observation::new(k as u32, cam, ids[*p], *xy, [wt, wt]))
                 .unwrap();
         }
@@ -115,8 +116,9 @@ fn fill_whole_scene(w: &mut Window, s: &Scene, right: impl Fn([f64; 2]) -> [f64;
     }
     let ids: Vec<u32> = s.points.iter().map(|p| w.add_point(*p).unwrap()).collect();
     let wt = 1.0 / (SIGMA_MM * SIGMA_MM);
-    for (e, c, p, xy, _) in &s.obs {
-        let (cam, xy) = if *c == 0 {
+    for o in &s.observations {
+        let (e, c, p, xy) = (&o.epoch, &o.camera, &o.point, &o.xy);
+        let (cam, xy) = if *c == Camera::Left {
             (Camera::Left, *xy)
         } else {
             (Camera::Right, right(*xy))
@@ -159,7 +161,7 @@ fn solve_with_right_error(
     let cfg = AdjustConfig {
         window: s.poses.len(),
         max_points: s.points.len(),
-        max_observations: s.obs.len(),
+        max_observations: s.observations.len(),
         estimate_rig,
         self_calibration,
         robust: Robust::None,
@@ -293,7 +295,7 @@ fn held_run(s: &Scene, start: &Rig, hold: bool, correct: bool) -> HeldRun {
     let cfg = AdjustConfig {
         window: s.poses.len(),
         max_points: s.points.len(),
-        max_observations: s.obs.len(),
+        max_observations: s.observations.len(),
         estimate_rig: hold,
         self_calibration: hold.then_some(InteriorSigmas {
             principal_point_mm: [1e-4, 2.0 * PIXEL_MM],

@@ -38,7 +38,7 @@ fn clean_windows_are_unbiased_with_unit_sigma0() {
         let cfg = AdjustConfig {
             window: epochs,
             max_points: points,
-            max_observations: s.obs.len(),
+            max_observations: s.observations.len(),
             robust: Robust::None,
             ..AdjustConfig::default()
         };
@@ -70,7 +70,7 @@ fn point_observation_lists_follow_the_last_adjustment() {
     let cfg = AdjustConfig {
         window: 3,
         max_points: 61,
-        max_observations: s.obs.len() + 1,
+        max_observations: s.observations.len() + 1,
         ..AdjustConfig::default()
     };
     let mut mem = arena_for(&cfg);
@@ -90,7 +90,7 @@ fn point_observation_lists_follow_the_last_adjustment() {
         assert_eq!(list, &expected[..], "point {id}");
         listed += list.len();
     }
-    assert_eq!(listed, s.obs.len());
+    assert_eq!(listed, s.observations.len());
     let extra = w.add_point(s.points[0]).unwrap();
     assert!(
         w.point_observations(ids[0]).is_none(),
@@ -98,8 +98,12 @@ fn point_observation_lists_follow_the_last_adjustment() {
     );
     w.solve().unwrap();
     assert_eq!(w.point_observations(extra), Some(&[][..]));
-    let (e, c, _, xy, _) = s.obs[0];
-    let cam = if c == 0 { Camera::Left } else { Camera::Right };
+    let DriveObservation {
+        epoch: e,
+        camera: cam,
+        xy,
+        ..
+    } = s.observations[0];
     w.add_observation(Observation::new(e as u32, cam, extra, xy, [1.0, 1.0]))
         .unwrap();
     assert!(
@@ -115,14 +119,17 @@ fn robust_default_flags_blunders_on_clean_and_dirty_data() {
     let cfg = AdjustConfig {
         window: 6,
         max_points: 300,
-        max_observations: s.obs.len(),
+        max_observations: s.observations.len(),
         ..AdjustConfig::default()
     };
     let mut mem = arena_for(&cfg);
     let mut arena = Arena::new(&mut mem);
     let (mut w, _) = load(&s, cfg, &mut arena, 8);
     let r = w.solve().unwrap();
-    assert!(r.flagged as f64 <= 0.01 * s.obs.len() as f64, "{r:?}");
+    assert!(
+        r.flagged as f64 <= 0.01 * s.observations.len() as f64,
+        "{r:?}"
+    );
     assert!(r.chi2.passed, "{r:?}");
 
     // 10 % gross errors of 10..50 px.
@@ -133,7 +140,7 @@ fn robust_default_flags_blunders_on_clean_and_dirty_data() {
         let cfg = AdjustConfig {
             window: 6,
             max_points: 300,
-            max_observations: s.obs.len(),
+            max_observations: s.observations.len(),
             ..AdjustConfig::default()
         };
         let mut mem = arena_for(&cfg);
@@ -141,7 +148,7 @@ fn robust_default_flags_blunders_on_clean_and_dirty_data() {
         let (mut w, ids) = load(&s, cfg, &mut arena, seed);
         let r = w.solve().unwrap();
         for (i, o) in w.observations().iter().enumerate() {
-            if s.obs[i].4 {
+            if s.observations[i].blunder {
                 blunders += 1;
                 caught += o.is_flagged() as usize;
             } else {
@@ -172,7 +179,7 @@ fn estimated_rig_and_sliding_window_stay_within_three_sigma() {
     let cfg = AdjustConfig {
         window: 4,
         max_points: 400,
-        max_observations: s.obs.len(),
+        max_observations: s.observations.len(),
         estimate_rig: true,
         sigmas: ConstraintSigmas {
             rig_angle_rad: 0.01,
@@ -209,7 +216,8 @@ fn estimated_rig_and_sliding_window_stay_within_three_sigma() {
         }
         let id = w.add_epoch(&Pose::from_params(&q), 0.2 * k as f64).unwrap();
         assert_eq!(id as usize, k);
-        for (e, c, p, xy, _) in &s.obs {
+        for o in &s.observations {
+            let (e, c, p, xy) = (&o.epoch, &o.camera, &o.point, &o.xy);
             if *e != k {
                 continue;
             }
@@ -221,7 +229,7 @@ fn estimated_rig_and_sliding_window_stay_within_three_sigma() {
                 let t = s.points[*p];
                 ids[*p] = w.add_point([t[0] + 0.1, t[1] - 0.1, t[2] + 0.05]).unwrap();
             }
-            let cam = if *c == 0 { Camera::Left } else { Camera::Right };
+            let cam = *c;
             w.add_observation(Observation::new(k as u32, cam, ids[*p], *xy, [wt, wt]))
                 .unwrap();
         }
@@ -324,9 +332,17 @@ fn degenerate_input_errors_or_flags_never_panics() {
         w.add_epoch(&s.poses[0], 0.0).unwrap();
         w.add_epoch(&s.poses[1], 0.2).unwrap();
         let p = w.add_point(s.points[0]).unwrap();
-        for (e, c, pi, xy, _) in s.obs.iter().filter(|o| o.2 == 0 && o.0 < 2) {
-            let cam = if *c == 0 { Camera::Left } else { Camera::Right };
-            let _ = pi;
+        for DriveObservation {
+            epoch: e,
+            camera: c,
+            xy,
+            ..
+        } in s
+            .observations
+            .iter()
+            .filter(|o| o.point == 0 && o.epoch < 2)
+        {
+            let cam = *c;
             w.add_observation(Observation::new(*e as u32, cam, p, *xy, [wt, wt]))
                 .unwrap();
         }
@@ -419,7 +435,7 @@ fn seed_weighting_schemes_and_seed_reweighting() {
     let cfg = AdjustConfig {
         window: 4,
         max_points: 200,
-        max_observations: s.obs.len(),
+        max_observations: s.observations.len(),
         robust: Robust::SeedReweight {
             threshold_mm: PIXEL_MM,
         },
@@ -440,8 +456,11 @@ fn seed_weighting_schemes_and_seed_reweighting() {
         );
     }
     // Most blunders have an x residual above one pixel.
-    let caught = flagged.iter().filter(|&&i| s.obs[i].4).count();
-    let blunders = s.obs.iter().filter(|o| o.4).count();
+    let caught = flagged
+        .iter()
+        .filter(|&&i| s.observations[i].blunder)
+        .count();
+    let blunders = s.observations.iter().filter(|o| o.blunder).count();
     assert!(
         caught as f64 >= 0.6 * blunders as f64,
         "{caught}/{blunders}"
@@ -455,7 +474,7 @@ fn gnss_and_odometer_constraints_enter_the_adjustment() {
     let cfg = AdjustConfig {
         window: 6,
         max_points: 150,
-        max_observations: s.obs.len(),
+        max_observations: s.observations.len(),
         sigmas: ConstraintSigmas {
             velocity_change_mps: 2.0,
             ..ConstraintSigmas::default()
@@ -498,7 +517,7 @@ fn control_points_carry_a_loose_datum() {
     let cfg = AdjustConfig {
         window: 4,
         max_points: 200,
-        max_observations: s.obs.len(),
+        max_observations: s.observations.len(),
         sigmas: ConstraintSigmas {
             datum_angle_rad: 0.1,
             datum_position_m: 1.0,

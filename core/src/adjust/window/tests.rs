@@ -153,7 +153,7 @@ fn schur_step_zeroes_the_numerical_gradient() {
     let cfg = AdjustConfig {
         window: 3,
         max_points: 12,
-        max_observations: s.obs.len(),
+        max_observations: s.observations.len(),
         estimate_rig: true,
         self_calibration: Some(InteriorSigmas {
             principal_point_mm: [0.02, 0.02],

@@ -10,7 +10,7 @@ use super::refine::refine_match;
 use super::synthetic::{SyntheticScene, DISTRACTOR};
 use super::*;
 use crate::budget::{Arena, MemoryBudget};
-use crate::camera::{project_to_pixel, DistortionModel, Interior, Pose, Rig};
+use crate::camera::{project_to_pixel, Interior, Pose, Rig};
 use crate::features::{Descriptor, Keypoint};
 use crate::image::ImageView;
 
@@ -210,17 +210,8 @@ fn rectified_stereo_on_noisy_scene_is_right() {
 
 #[test]
 fn general_rig_with_distortion_and_rotation() {
-    // A converging rig with the seed camera's distortion: the epipolar curve is bent in pixels.
-    let cam = Interior {
-        width_px: 640,
-        height_px: 480,
-        pixel_size_mm: [0.01, 0.01],
-        focal_mm: 5.0,
-        principal_point_mm: [0.05, -0.03],
-        radial: [-4e-3, 2e-5, 0.0],
-        decentering: [3e-4, -2e-4],
-        distortion_model: DistortionModel::Correction,
-    };
+    // A converging rig with the test camera's distortion: the epipolar curve is bent in pixels.
+    let cam = crate::testkit::test_camera();
     let rig = Rig {
         left: cam,
         right: cam,
