@@ -11,7 +11,7 @@ use phototraverse_core::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget
 use phototraverse_core::protocol::assembly::{AssemblyError, FrameAssembler};
 use phototraverse_core::protocol::messages::{
     points_flags, stage, Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult,
-    EpochStatus, ErrorCode, Message, Points, SettingError, StackUse, Stats,
+    ErrorCode, Message, Points, ResultStatus, SettingError, StackUse, Stats,
 };
 use phototraverse_core::protocol::{MAX_PAYLOAD, PROTOCOL_VERSION};
 
@@ -628,7 +628,7 @@ impl<Pr: EpochProcessor> Epochs<'_, '_, Pr> {
         tx.error(port, code, epoch, seq, text)?;
         tx.send(
             port,
-            &Message::Result(EpochResult::empty(epoch, EpochStatus::Lost)),
+            &Message::Result(EpochResult::empty(epoch, ResultStatus::Lost)),
         )
     }
 

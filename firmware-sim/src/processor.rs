@@ -5,8 +5,8 @@ use phototraverse_core::budget::{Arena, ComponentKind, MemoryBudget, OutOfMemory
 use phototraverse_core::features::FeatureSet;
 use phototraverse_core::image::ImageView;
 use phototraverse_core::protocol::messages::{
-    self, capacity, processor_kind, stage, Aux, CapacityUse, Configure, EpochResult, EpochStatus,
-    Figures, Points, SiftCounts,
+    self, capacity, processor_kind, stage, Aux, CapacityUse, Configure, EpochResult, Figures,
+    Points, ResultStatus, SiftCounts,
 };
 use phototraverse_core::sift::{Sift, SiftConfig, SiftError};
 
@@ -166,7 +166,7 @@ impl ProcessorFactory for SiftFactory {
 impl EpochProcessor for SiftProcessor<'_> {
     fn process(&mut self, input: &EpochInput, clock: &dyn Clock) -> EpochOutput {
         let mut timings_us = [0u32; stage::COUNT];
-        let mut result = EpochResult::empty(input.epoch, EpochStatus::FeaturesOnly);
+        let mut result = EpochResult::empty(input.epoch, ResultStatus::FeaturesOnly);
         let mut sift = SiftCounts::default();
         let [fl, fr] = &mut self.features;
         for (k, (image, set, st)) in [
@@ -184,7 +184,7 @@ impl EpochProcessor for SiftProcessor<'_> {
                     sift.extrema[k] = stats.extrema as u32;
                     sift.refined[k] = stats.refined as u32;
                 }
-                Err(_) => result.status = EpochStatus::Failed,
+                Err(_) => result.status = ResultStatus::Failed,
             }
             timings_us[st] = clock.now_us().saturating_sub(t0) as u32;
         }
@@ -275,7 +275,7 @@ impl EpochProcessor for ImageStats<'_> {
         let t2 = clock.now_us();
         timings_us[stage::SIFT_LEFT] = (t1 - t0) as u32;
         timings_us[stage::SIFT_RIGHT] = (t2 - t1) as u32;
-        let mut result = EpochResult::empty(input.epoch, EpochStatus::StatsOnly);
+        let mut result = EpochResult::empty(input.epoch, ResultStatus::StatsOnly);
         result.figures = Figures::ImageStats(messages::ImageStats {
             mean: [l.0, r.0],
             gradient_energy: [l.2, r.2],

@@ -13,7 +13,7 @@ use phototraverse_core::camera::Pose;
 use phototraverse_core::matching::StereoGeometry;
 use phototraverse_core::protocol::messages::{
     capacity, processor_kind, stage, AdjustMode, Adjustment, CapacityUse, Configure, Counts,
-    EpochResult, EpochStatus, Figures, PointObservation, PointRecord, Points, ResultFlags,
+    EpochResult, Figures, PointObservation, PointRecord, Points, ResultFlags, ResultStatus,
     RigEstimate, AUX_GNSS, AUX_ODOMETER,
 };
 use phototraverse_core::sift::SiftError;
@@ -95,14 +95,14 @@ pub fn result_flags(traverse_flags: u32) -> ResultFlags {
 /// The Result of an epoch's traverse output (the rig block apart).
 pub fn epoch_result(epoch: u32, out: &traverse::EpochOutput) -> EpochResult {
     let status = match out.status {
-        traverse::EpochStatus::Ok => EpochStatus::Ok,
-        traverse::EpochStatus::Flagged => EpochStatus::Flagged,
-        traverse::EpochStatus::Predicted => EpochStatus::Predicted,
-        traverse::EpochStatus::Rejected => EpochStatus::Failed,
+        traverse::EpochStatus::Ok => ResultStatus::Ok,
+        traverse::EpochStatus::Flagged => ResultStatus::Flagged,
+        traverse::EpochStatus::Predicted => ResultStatus::Predicted,
+        traverse::EpochStatus::Rejected => ResultStatus::Failed,
     };
     // Only an adjusted epoch (Ok or Flagged) has figures of its own; the others'
     // would be zeros that read like a perfect fit.
-    let adjusted = matches!(status, EpochStatus::Ok | EpochStatus::Flagged);
+    let adjusted = matches!(status, ResultStatus::Ok | ResultStatus::Flagged);
     let figures = if adjusted {
         Figures::Adjustment(Adjustment {
             sigma0: out.sigma0,
@@ -581,7 +581,7 @@ mod tests {
             ..Default::default()
         };
         let r = epoch_result(7, &out);
-        assert_eq!(r.status, EpochStatus::Flagged);
+        assert_eq!(r.status, ResultStatus::Flagged);
         assert_eq!(r.flags, ResultFlags::FEW_TIE_POINTS | ResultFlags::CAPACITY);
         assert_eq!(
             r.counts,
@@ -599,8 +599,8 @@ mod tests {
         assert_eq!((a.sigma0, a.rms_px, a.redundancy), (0.8, 0.4, 500));
         assert!((a.chi2 - 0.64 * 500.0).abs() < 1e-9);
         for (status, wire) in [
-            (traverse::EpochStatus::Predicted, EpochStatus::Predicted),
-            (traverse::EpochStatus::Rejected, EpochStatus::Failed),
+            (traverse::EpochStatus::Predicted, ResultStatus::Predicted),
+            (traverse::EpochStatus::Rejected, ResultStatus::Failed),
         ] {
             let r = epoch_result(7, &traverse::EpochOutput { status, ..out });
             assert_eq!(r.status, wire);
@@ -642,7 +642,7 @@ mod tests {
                     flags: ResultFlags(u32::MAX),
                     figures,
                     rig,
-                    ..EpochResult::empty(u32::MAX, EpochStatus::Flagged)
+                    ..EpochResult::empty(u32::MAX, ResultStatus::Flagged)
                 };
                 r.emit(&mut buf).unwrap()
             })

@@ -6,9 +6,9 @@
 use crate::link::{FaultCounters, LinkOptions, Transport};
 use phototraverse_core::protocol::crc::crc32;
 use phototraverse_core::protocol::messages::{
-    Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult, EpochStatus, ErrorCode,
-    FrameBegin, FrameChunk, FrameEnd, Hello, Message, MessageType, PixelFormat, Points,
-    PointsRequest, Reset, Stats, CHUNK_HEADER_LEN,
+    Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult, ErrorCode, FrameBegin,
+    FrameChunk, FrameEnd, Hello, Message, MessageType, PixelFormat, Points, PointsRequest, Reset,
+    ResultStatus, Stats, CHUNK_HEADER_LEN,
 };
 use phototraverse_core::protocol::{
     wire_len, Endpoint, EndpointBuffers, EndpointConfig, Event, SendError, MAX_ENCODED, MAX_PACKET,
@@ -557,7 +557,7 @@ impl<T: Transport> Session<T> {
         let pending: Vec<u32> = self.sent_epochs.iter().map(|e| e.0).collect();
         self.wait_for("the results of the epochs sent", |s| {
             pending.iter().all(|e| match s.results.get(e) {
-                Some(r) => r.status == EpochStatus::Lost || s.stats.contains_key(e),
+                Some(r) => r.status == ResultStatus::Lost || s.stats.contains_key(e),
                 None => false,
             })
         })
@@ -719,7 +719,7 @@ impl<T: Transport> Session<T> {
     pub fn lost_epochs(&self) -> Vec<u32> {
         self.results
             .values()
-            .filter(|r| r.status == EpochStatus::Lost)
+            .filter(|r| r.status == ResultStatus::Lost)
             .map(|r| r.epoch)
             .collect()
     }

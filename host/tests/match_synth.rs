@@ -11,7 +11,7 @@ use phototraverse_core::budget::Arena;
 use phototraverse_core::camera::{pose_from_kitti, project_to_pixel, Pose, Rig};
 use phototraverse_core::features::{Descriptor, Keypoint};
 use phototraverse_core::matching::{
-    relative_motion, EpochStatus, Features, MatchConfig, Matcher, RefineConfig, StereoFeatures,
+    relative_motion, Features, MatchConfig, MatchOutcome, Matcher, RefineConfig, StereoFeatures,
     StereoGeometry,
 };
 use phototraverse_core::sift::SiftConfig;
@@ -169,7 +169,7 @@ fn synthetic_quads_are_right() {
             .process_epoch_with(f.features(), prev, views, Some(&ds.rig), motion.as_ref())
             .unwrap();
         if k == 0 {
-            assert_eq!(r.status, EpochStatus::FirstEpoch);
+            assert_eq!(r.status, MatchOutcome::FirstEpoch);
             continue;
         }
         println!(

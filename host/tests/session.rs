@@ -3,8 +3,8 @@
 use phototraverse_core::camera::{Interior, Rig};
 use phototraverse_core::protocol::crc::crc32;
 use phototraverse_core::protocol::messages::{
-    Camera, Configure, EpochStatus, ErrorCode, FrameBegin, FrameChunk, FrameEnd, Message, Pipeline,
-    PixelFormat, CONFIG_VERSION,
+    Camera, Configure, ErrorCode, FrameBegin, FrameChunk, FrameEnd, Message, Pipeline, PixelFormat,
+    ResultStatus, CONFIG_VERSION,
 };
 use phototraverse_core::protocol::{encode_packet, Header, MAX_PACKET};
 use phototraverse_host::link::inproc::InProc;
@@ -146,7 +146,7 @@ fn check_results<T: Transport>(s: &Session<T>, epochs: std::ops::Range<u32>, w: 
             .result(e)
             .unwrap_or_else(|| panic!("no result for epoch {e}"));
         let (li, ri) = (image(e, 0, w, h), image(e, 1, w, h));
-        if r.status == EpochStatus::FeaturesOnly {
+        if r.status == ResultStatus::FeaturesOnly {
             let cfg = config(w, h);
             let [l, rr] = [local_sift(&li, w, h, &cfg), local_sift(&ri, w, h, &cfg)];
             let want = [l[0], rr[0]];
@@ -159,7 +159,7 @@ fn check_results<T: Transport>(s: &Session<T>, epochs: std::ops::Range<u32>, w: 
             assert_eq!(sift.extrema, [l[1], rr[1]], "epoch {e}");
             assert_eq!(sift.refined, [l[2], rr[2]], "epoch {e}");
         } else {
-            assert_eq!(r.status, EpochStatus::StatsOnly, "epoch {e}");
+            assert_eq!(r.status, ResultStatus::StatsOnly, "epoch {e}");
             let got = r.image_stats().expect("the statistics processor's figures");
             for (k, img) in [&li, &ri].into_iter().enumerate() {
                 let (mean, gradient, median) = expected_stats(img, w as usize, h as usize);
@@ -192,7 +192,7 @@ fn full_session<T: Transport>(t: T, opts: SessionOptions, epochs: u32) -> Sessio
 fn sift_session<T: Transport>(t: T, epochs: u32) {
     let s = full_session(t, SessionOptions::default(), epochs);
     for e in 0..epochs {
-        assert_eq!(s.result(e).unwrap().status, EpochStatus::FeaturesOnly);
+        assert_eq!(s.result(e).unwrap().status, ResultStatus::FeaturesOnly);
     }
 }
 
@@ -211,7 +211,7 @@ fn inproc_session_returns_a_result_per_epoch() {
     let s = full_session(inproc_stats(), SessionOptions::default(), 4);
     assert!(s.errors().is_empty(), "{:?}", s.errors());
     let s = full_session(inproc(), SessionOptions::default(), 6);
-    assert_eq!(s.result(5).unwrap().status, EpochStatus::FeaturesOnly);
+    assert_eq!(s.result(5).unwrap().status, ResultStatus::FeaturesOnly);
     let link = s.link_stats();
     assert_eq!(link.frame_bytes, 6 * 2 * W as u64 * H as u64);
     // A clean link loses nothing. A firmware starved of the CPU (a loaded
@@ -566,8 +566,8 @@ fn bad_input_is_refused_clearly_and_the_session_goes_on() {
     send_epochs(&mut s, 0..3, W, H);
     s.finish().unwrap();
     check_results(&s, 0..3, W, H);
-    assert_eq!(s.result(100).unwrap().status, EpochStatus::Lost);
-    assert_eq!(s.result(101).unwrap().status, EpochStatus::Lost);
+    assert_eq!(s.result(100).unwrap().status, ResultStatus::Lost);
+    assert_eq!(s.result(101).unwrap().status, ResultStatus::Lost);
     assert_eq!(s.lost_epochs(), vec![100, 101, 102]);
 }
 
@@ -588,7 +588,7 @@ fn a_frame_of_another_size_than_the_cameras_is_refused_naming_the_field() {
         "{text}"
     );
     s.finish().unwrap();
-    assert_eq!(s.result(0).unwrap().status, EpochStatus::Lost);
+    assert_eq!(s.result(0).unwrap().status, ResultStatus::Lost);
     // One error for the epoch, not one per camera or chunk.
     let n = s.errors().iter().filter(|e| e.code == "FrameSize").count();
     assert_eq!(n, 1, "{:?}", s.errors());

@@ -57,7 +57,7 @@ pub enum TemporalMode {
 
 /// The outcome of one epoch, in the order of the checks.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub enum EpochStatus {
+pub enum MatchOutcome {
     /// Tie points found.
     #[default]
     Ok,
@@ -78,7 +78,7 @@ pub enum EpochStatus {
 /// Report of one epoch.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct EpochReport {
-    pub status: EpochStatus,
+    pub status: MatchOutcome,
     pub stereo: StereoStats,
     pub left_temporal: PairStats,
     pub right_temporal: PairStats,
@@ -499,7 +499,7 @@ impl<'a> Matcher<'a> {
         report.stereo = self.stereo_into_cur(cur, images);
         let Some(prev) = prev else {
             self.tracks.clear();
-            report.status = self.stereo_status(&cur).unwrap_or(EpochStatus::FirstEpoch);
+            report.status = self.stereo_status(&cur).unwrap_or(MatchOutcome::FirstEpoch);
             self.accept_epoch();
             return Ok(report);
         };
@@ -524,29 +524,29 @@ impl<'a> Matcher<'a> {
             self.temporal(prev.right, cur.right, true, guided);
         if self.is_repeated(prev, cur) {
             // Leave every buffer of the previous epoch as it was.
-            report.status = EpochStatus::RepeatedFrame;
+            report.status = MatchOutcome::RepeatedFrame;
             return Ok(report);
         }
         self.close_quads(prev, cur, rig, &mut report);
         report.status = match self.stereo_status(&cur) {
             Some(s) => s,
             None if (report.tie_points as usize) < self.cfg.min_temporal_matches => {
-                EpochStatus::Lost
+                MatchOutcome::Lost
             }
-            None => EpochStatus::Ok,
+            None => MatchOutcome::Ok,
         };
         self.accept_epoch();
         Ok(report)
     }
 
-    fn stereo_status(&self, cur: &StereoFeatures<'_>) -> Option<EpochStatus> {
+    fn stereo_status(&self, cur: &StereoFeatures<'_>) -> Option<MatchOutcome> {
         if cur.left.keypoints.is_empty() || cur.right.keypoints.is_empty() {
-            Some(EpochStatus::NoKeypoints)
+            Some(MatchOutcome::NoKeypoints)
         } else if self.cur.right_of[..self.cur.n_left]
             .iter()
             .all(|&j| j == NONE)
         {
-            Some(EpochStatus::NoStereoMatches)
+            Some(MatchOutcome::NoStereoMatches)
         } else {
             None
         }

@@ -27,7 +27,7 @@ mod tests;
 
 pub use config::{MatchConfig, MatchError, RefineConfig, StereoGeometry, NONE};
 pub use matcher::{
-    EpochReport, EpochStatus, Matcher, StereoFeatures, StereoMatch, StereoStats, TemporalMode,
+    EpochReport, MatchOutcome, Matcher, StereoFeatures, StereoMatch, StereoStats, TemporalMode,
     TiePoint,
 };
 pub use predict::{predict_positions, relative_motion, triangulate};

@@ -125,7 +125,7 @@ pub fn sample_messages(chunk: &[u8]) -> [Message<'_>; 16] {
 pub fn sample_result() -> EpochResult {
     EpochResult {
         epoch: 7,
-        status: EpochStatus::Flagged,
+        status: ResultStatus::Flagged,
         pose: [1.5, 0.1, -0.2, 3.0, 40.0, 1.6],
         sigma: [1e-4, 2e-4, 3e-4, 0.01, 0.02, 0.03],
         flags: ResultFlags::FEW_TIE_POINTS | ResultFlags::CHI2 | ResultFlags::ROTATION_FROM_MATCHES,

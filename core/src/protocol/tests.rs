@@ -268,7 +268,7 @@ fn configure_v2_round_trips_and_v1_payloads_get_the_v1_behaviour() {
 
 #[test]
 fn result_rig_block_is_optional_and_complete_when_present() {
-    let mut r = EpochResult::empty(3, EpochStatus::Ok);
+    let mut r = EpochResult::empty(3, ResultStatus::Ok);
     let mut payload = [0u8; 512];
     let n = r.emit(&mut payload).unwrap();
     assert_eq!(n, 138);
@@ -362,32 +362,32 @@ fn every_result_block_round_trips_and_the_largest_fits_a_transmit_slot() {
 #[test]
 fn result_status_codes_are_stable_and_unknown_ones_are_kept() {
     let known = [
-        (EpochStatus::Ok, 0),
-        (EpochStatus::FeaturesOnly, 1),
-        (EpochStatus::StatsOnly, 2),
-        (EpochStatus::Lost, 3),
-        (EpochStatus::Failed, 4),
-        (EpochStatus::Flagged, 5),
-        (EpochStatus::Predicted, 6),
+        (ResultStatus::Ok, 0),
+        (ResultStatus::FeaturesOnly, 1),
+        (ResultStatus::StatsOnly, 2),
+        (ResultStatus::Lost, 3),
+        (ResultStatus::Failed, 4),
+        (ResultStatus::Flagged, 5),
+        (ResultStatus::Predicted, 6),
     ];
     for (s, code) in known {
         assert_eq!(s.code(), code);
-        assert_eq!(EpochStatus::from_code(code), s);
+        assert_eq!(ResultStatus::from_code(code), s);
     }
     for code in 7..=u8::MAX {
-        assert_eq!(EpochStatus::from_code(code), EpochStatus::Unknown(code));
+        assert_eq!(ResultStatus::from_code(code), ResultStatus::Unknown(code));
     }
     // A newer firmware's status and flag bits reach the host as they were sent.
     let mut payload = [0u8; 512];
     let r = EpochResult {
-        status: EpochStatus::Unknown(42),
+        status: ResultStatus::Unknown(42),
         flags: ResultFlags(1 << 31) | ResultFlags::LOST,
         ..sample_result()
     };
     let n = r.emit(&mut payload).unwrap();
     assert_eq!(payload[4], 42);
     let back = EpochResult::parse(&payload[..n]).unwrap();
-    assert_eq!(back.status, EpochStatus::Unknown(42));
+    assert_eq!(back.status, ResultStatus::Unknown(42));
     assert!(back.flags.contains(ResultFlags::LOST) && back.flags.bits() & (1 << 31) != 0);
 }
 

@@ -47,7 +47,7 @@ use crate::matching::refine::{
     correlate, magnify_template, recentre, refine_checked, TEMPLATE_LEN,
 };
 use crate::matching::{
-    relative_motion, EpochStatus as MatchStatus, Features, MatchError, Matcher, StereoFeatures,
+    relative_motion, Features, MatchError, MatchOutcome as MatchStatus, Matcher, StereoFeatures,
     TiePoint,
 };
 use crate::sift::{Sift, SiftError};

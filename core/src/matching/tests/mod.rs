@@ -343,7 +343,7 @@ fn run_traverse(
             .process_epoch(frames[k].features(), prev, None, motion_ref)
             .unwrap();
         if k == 0 {
-            assert_eq!(rep.status, EpochStatus::FirstEpoch);
+            assert_eq!(rep.status, MatchOutcome::FirstEpoch);
             continue;
         }
         let (pf, cf) = (&frames[k - 1], &frames[k]);
@@ -388,7 +388,7 @@ fn guided_traverse_quads_are_right() {
     std::println!("quads: {total} tie points, {off} off by > 2 px, {per_epoch:.0} per epoch, mean track length {mean_len:.2}");
     for r in &reports {
         std::println!("{r:?}");
-        assert_eq!(r.status, EpochStatus::Ok);
+        assert_eq!(r.status, MatchOutcome::Ok);
         assert_eq!(r.left_mode, TemporalMode::Guided);
         assert_eq!(r.right_mode, TemporalMode::Guided);
         let q = r.quads;
@@ -408,7 +408,7 @@ fn fallback_without_prediction() {
     let (total, off, reports, _) = run_traverse(config(), &scene, 3, 0.5, false);
     for r in &reports {
         assert_eq!(r.left_mode, TemporalMode::Fallback);
-        assert_eq!(r.status, EpochStatus::Ok);
+        assert_eq!(r.status, MatchOutcome::Ok);
     }
     assert!(total > 200);
     assert!(off * 100 <= total, "{off} of {total}");
@@ -494,11 +494,11 @@ fn bad_input_gives_status_not_panic() {
         right: Features::new(&[], &[]),
     };
     let r = m.process_epoch(empty, None, None, None).unwrap();
-    assert_eq!(r.status, EpochStatus::NoKeypoints);
+    assert_eq!(r.status, MatchOutcome::NoKeypoints);
     let r = m
         .process_epoch(e0.features(), Some(empty), None, mo)
         .unwrap();
-    assert_eq!((r.status, r.tie_points), (EpochStatus::Lost, 0));
+    assert_eq!((r.status, r.tie_points), (MatchOutcome::Lost, 0));
 
     // All keypoints identical (position and descriptor).
     let same_k = vec![
@@ -516,23 +516,23 @@ fn bad_input_gives_status_not_panic() {
         right: Features::new(&same_k, &same_d),
     };
     let r = m.process_epoch(same, None, None, None).unwrap();
-    assert_eq!(r.status, EpochStatus::NoStereoMatches);
+    assert_eq!(r.status, MatchOutcome::NoStereoMatches);
     assert_eq!(m.stereo_matches(&same_k).count(), 0);
     let r = m
         .process_epoch(e0.features(), Some(same), None, mo)
         .unwrap();
-    assert_eq!((r.status, r.tie_points), (EpochStatus::Lost, 0));
+    assert_eq!((r.status, r.tie_points), (MatchOutcome::Lost, 0));
 
     // A repeated frame: ignored, state unchanged, the traverse goes on.
     let r = m
         .process_epoch(e0.features(), Some(e0.features()), None, mo)
         .unwrap();
-    assert_eq!((r.status, r.tie_points), (EpochStatus::RepeatedFrame, 0));
+    assert_eq!((r.status, r.tie_points), (MatchOutcome::RepeatedFrame, 0));
     let e1 = epoch(&scene, &rig, &pose_at(0.8), 1);
     let r = m
         .process_epoch(e1.features(), Some(e0.features()), None, mo)
         .unwrap();
-    assert_eq!(r.status, EpochStatus::Ok);
+    assert_eq!(r.status, MatchOutcome::Ok);
     assert!(r.tie_points > 300);
 
     // A frame from another place.
@@ -542,7 +542,7 @@ fn bad_input_gives_status_not_panic() {
         .process_epoch(e2.features(), Some(e1.features()), None, mo)
         .unwrap();
     std::println!("another place: {r:?}");
-    assert_eq!(r.status, EpochStatus::Lost);
+    assert_eq!(r.status, MatchOutcome::Lost);
     assert!(r.tie_points < 10, "{}", r.tie_points);
     assert_eq!(r.left_mode, TemporalMode::Fallback);
 
@@ -569,7 +569,7 @@ fn bad_input_gives_status_not_panic() {
         right: e0.right.features(),
     };
     let r = m.process_epoch(nanf, None, None, None).unwrap();
-    assert_eq!(r.status, EpochStatus::FirstEpoch);
+    assert_eq!(r.status, MatchOutcome::FirstEpoch);
     // More keypoints than the capacity: the rest are ignored and counted.
     let big = SyntheticScene {
         points: 8000,

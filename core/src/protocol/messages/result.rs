@@ -5,7 +5,7 @@ use core::ops::{BitOr, BitOrAssign};
 
 /// Status of an epoch's result.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum EpochStatus {
+pub enum ResultStatus {
     /// Oriented.
     Ok,
     /// Features extracted, no orientation (the firmware runs the feature processor).
@@ -26,28 +26,28 @@ pub enum EpochStatus {
     Unknown(u8),
 }
 
-impl EpochStatus {
-    const KNOWN: [EpochStatus; 7] = [
-        EpochStatus::Ok,
-        EpochStatus::FeaturesOnly,
-        EpochStatus::StatsOnly,
-        EpochStatus::Lost,
-        EpochStatus::Failed,
-        EpochStatus::Flagged,
-        EpochStatus::Predicted,
+impl ResultStatus {
+    const KNOWN: [ResultStatus; 7] = [
+        ResultStatus::Ok,
+        ResultStatus::FeaturesOnly,
+        ResultStatus::StatsOnly,
+        ResultStatus::Lost,
+        ResultStatus::Failed,
+        ResultStatus::Flagged,
+        ResultStatus::Predicted,
     ];
 
     /// Wire code.
     pub const fn code(self) -> u8 {
         match self {
-            EpochStatus::Ok => 0,
-            EpochStatus::FeaturesOnly => 1,
-            EpochStatus::StatsOnly => 2,
-            EpochStatus::Lost => 3,
-            EpochStatus::Failed => 4,
-            EpochStatus::Flagged => 5,
-            EpochStatus::Predicted => 6,
-            EpochStatus::Unknown(code) => code,
+            ResultStatus::Ok => 0,
+            ResultStatus::FeaturesOnly => 1,
+            ResultStatus::StatsOnly => 2,
+            ResultStatus::Lost => 3,
+            ResultStatus::Failed => 4,
+            ResultStatus::Flagged => 5,
+            ResultStatus::Predicted => 6,
+            ResultStatus::Unknown(code) => code,
         }
     }
 
@@ -55,7 +55,7 @@ impl EpochStatus {
         Self::KNOWN
             .into_iter()
             .find(|s| s.code() == code)
-            .unwrap_or(EpochStatus::Unknown(code))
+            .unwrap_or(ResultStatus::Unknown(code))
     }
 }
 
@@ -269,7 +269,7 @@ impl Figures {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EpochResult {
     pub epoch: u32,
-    pub status: EpochStatus,
+    pub status: ResultStatus,
     /// Left camera: omega, phi, kappa (rad), X, Y, Z (m).
     pub pose: [f64; 6],
     /// Standard deviations of `pose`.
@@ -315,7 +315,7 @@ impl RigEstimate {
 }
 
 impl EpochResult {
-    pub fn empty(epoch: u32, status: EpochStatus) -> Self {
+    pub fn empty(epoch: u32, status: ResultStatus) -> Self {
         EpochResult {
             epoch,
             status,
@@ -356,7 +356,7 @@ repr!(
     |r| {
         Ok(EpochResult {
             epoch: r.u32()?,
-            status: EpochStatus::from_code(r.u8()?),
+            status: ResultStatus::from_code(r.u8()?),
             pose: r.f64s()?,
             sigma: r.f64s()?,
             flags: ResultFlags(r.u32()?),
