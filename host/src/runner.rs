@@ -79,6 +79,7 @@ pub fn run_dataset(ds: &Dataset, out: &Path, opts: &RunOptions) -> Result<RunOut
     let n = opts.max_epochs.map_or(ds.len(), |m| m.min(ds.len()));
     let bar = progress_bar(n as u64, opts.progress);
     let mut failure = None;
+    let started = std::time::Instant::now();
     for i in 0..n {
         if crate::interrupt::requested() {
             // The epochs done are finished as at the sequence's end: their last results
@@ -106,6 +107,10 @@ pub fn run_dataset(ds: &Dataset, out: &Path, opts: &RunOptions) -> Result<RunOut
                 failure = Some(anyhow::Error::new(e).context("flushing the tie points"));
             }
         }
+    }
+    if !run.report.epochs.is_empty() {
+        let ms = started.elapsed().as_secs_f64() * 1e3;
+        run.report.wall_ms_per_epoch = Some(ms / run.report.epochs.len() as f64);
     }
     let link = session.link_stats();
     run.report.link = serde_json::to_value(&link).ok();
@@ -308,10 +313,10 @@ impl<'d> Run<'d> {
         timings: Option<[u32; 8]>,
     ) -> EpochRecord {
         let status = match r.status {
-            messages::EpochStatus::Ok => EpochStatus::Ok,
-            messages::EpochStatus::Flagged => EpochStatus::Flagged,
-            messages::EpochStatus::Predicted => EpochStatus::Predicted,
-            messages::EpochStatus::Lost => EpochStatus::Lost,
+            messages::ResultStatus::Ok => EpochStatus::Ok,
+            messages::ResultStatus::Flagged => EpochStatus::Flagged,
+            messages::ResultStatus::Predicted => EpochStatus::Predicted,
+            messages::ResultStatus::Lost => EpochStatus::Lost,
             _ => EpochStatus::Predicted,
         };
         if no_pose_came_back(r) {
@@ -604,7 +609,7 @@ pub(crate) fn median(v: &mut [f64]) -> f64 {
 fn no_pose_came_back(r: &EpochResult) -> bool {
     matches!(
         r.status,
-        messages::EpochStatus::Lost | messages::EpochStatus::Failed
+        messages::ResultStatus::Lost | messages::ResultStatus::Failed
     )
 }
 
@@ -612,7 +617,7 @@ fn no_pose_came_back(r: &EpochResult) -> bool {
 fn epoch_test(r: &EpochResult) -> Option<ChiSquareTest> {
     let oriented = matches!(
         r.status,
-        messages::EpochStatus::Ok | messages::EpochStatus::Flagged
+        messages::ResultStatus::Ok | messages::ResultStatus::Flagged
     );
     r.adjustment()
         .filter(|a| oriented && a.sigma0 > 0.0 && a.redundancy >= 1)

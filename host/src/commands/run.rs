@@ -154,8 +154,11 @@ pub fn summary(o: &RunOutcome) -> String {
     } else {
         ""
     };
+    let end_to_end = r
+        .wall_ms_per_epoch
+        .map_or(String::new(), |w| format!(", {w:.1} ms end to end"));
     let mut s = format!(
-        "mode {}: {} epochs, {} flagged, median {:.1} ms per epoch in the firmware{clock}\n",
+        "mode {}: {} epochs, {} flagged, median {:.1} ms per epoch in the firmware{clock}{end_to_end}\n",
         r.mode,
         r.epochs.len(),
         r.flagged_epochs(),

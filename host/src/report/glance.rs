@@ -86,10 +86,13 @@ pub(crate) fn summary_table(report: &RunReport) -> String {
         .iter()
         .filter_map(|e| e.stage_ms.get("total").copied())
         .collect();
+    let end_to_end = report.wall_ms_per_epoch.map_or(String::new(), |w| {
+        format!("; {w:.1} ms end to end (images read, sent over the link, processed, answered)")
+    });
     if let Some(m) = median(&mut firmware) {
         rows.push((
             "time per epoch",
-            format!("{m:.1} ms median in the firmware (the link's transfer not included)"),
+            format!("{m:.1} ms median in the firmware{end_to_end}"),
         ));
     }
     if let Some(link) = &report.link {

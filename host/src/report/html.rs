@@ -861,10 +861,16 @@ mod tests {
                 tie_points: 25,
                 keypoints: [1000, 990],
                 stereo_matches: 500,
-                stage_ms: [("features".to_string(), 10.0), ("adjust".to_string(), 2.0)].into(),
+                stage_ms: [
+                    ("features".to_string(), 10.0),
+                    ("adjust".to_string(), 2.0),
+                    ("total".to_string(), 12.0),
+                ]
+                .into(),
                 ..EpochRecord::posed(k, None, EpochStatus::Ok, (eop, eop))
             });
         }
+        report.wall_ms_per_epoch = Some(80.0);
         report.epochs[3].status = EpochStatus::Flagged;
         report.epochs[3].note = Some("chi-square test failed".into());
         report.ground_truth = Some((0..5).map(|k| [0.0, k as f64, 0.0]).collect());
@@ -922,6 +928,7 @@ mod tests {
             .contains("5 (4 adjusted without remark, 1 flagged, 0 predicted, 0 lost on the link)"));
         assert!(summary.contains("<td>3</td><td>flagged</td><td>25</td>"));
         assert!(summary.contains("chi-square test failed"));
+        assert!(summary.contains("12.0 ms median in the firmware; 80.0 ms end to end"));
         // The trajectory draws the truth (first colour) first, under the estimate
         // (second colour); the key is under the plot, where it covers nothing.
         let top_view = &page[page.find("Trajectory (top view)").unwrap()..];

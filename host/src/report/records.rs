@@ -263,6 +263,10 @@ pub struct RunReport {
     /// hold the epochs done.
     #[serde(default)]
     pub interrupted: bool,
+    /// Wall time per epoch from the first frame sent to the last result received,
+    /// ms: reading the images, the link, the firmware and the host together.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wall_ms_per_epoch: Option<f64>,
     /// The positions' smoothing over the GNSS fixes after the run, when there were fixes.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub smoothing: Option<crate::smoothing::SmoothingSummary>,
