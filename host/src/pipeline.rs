@@ -7,8 +7,8 @@ use phototraverse_core::protocol::messages::{
 };
 use phototraverse_core::traverse::defaults::{
     TRAVERSE_CONTRAST, TRAVERSE_DISPARITY_FRACTION, TRAVERSE_EDGE_RATIO, TRAVERSE_FIXED_EPOCHS,
-    TRAVERSE_KEYPOINTS, TRAVERSE_MATCH_RATIO, TRAVERSE_OCTAVES, TRAVERSE_SCALES, TRAVERSE_TRACKS,
-    TRAVERSE_WINDOW,
+    TRAVERSE_KEYPOINTS, TRAVERSE_MATCH_RATIO, TRAVERSE_OCTAVES, TRAVERSE_SCALES, TRAVERSE_SIGMA_PX,
+    TRAVERSE_TRACKS, TRAVERSE_WINDOW,
 };
 use phototraverse_core::traverse::TraverseMode;
 use serde::{Deserialize, Serialize};
@@ -133,7 +133,7 @@ impl Default for PipelineSettings {
             mode: Mode::Window,
             estimate_rig: false,
             check_calibration: true,
-            sigma_px: 0.5,
+            sigma_px: TRAVERSE_SIGMA_PX,
             datum: None,
         }
     }

@@ -218,7 +218,7 @@ impl TraverseConfig {
             matching,
             adjust,
             resection: ResectionConfig::default(),
-            sigma_px: 0.5,
+            sigma_px: TRAVERSE_SIGMA_PX,
             min_tie_points: 12,
             min_ray_angle_rad: 0.05f64.to_radians(),
             // Far points carry the attitude; only points at practically infinite

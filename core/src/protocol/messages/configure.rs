@@ -126,7 +126,7 @@ impl Default for TraverseSettings {
         TraverseSettings {
             mode: AdjustMode::Window,
             estimate_rig: false,
-            sigma_px: 0.5,
+            sigma_px: crate::traverse::defaults::TRAVERSE_SIGMA_PX,
             datum: [core::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0, 0.0, 0.0],
             check_calibration: true,
             calibration_precision: CalibrationPrecision::UNSTATED,
