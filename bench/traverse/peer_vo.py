@@ -121,15 +121,26 @@ F = np.diag([1.0, -1.0, -1.0])
 
 def distorted_pixels(cam, xc, yc):
     """Pixels (c, r) whose corrected photo-coordinates are (xc, yc) (mm, relative to the
-    principal point): the correction x - dx(x) is inverted by fixed-point iteration."""
-    k1, k2 = cam.get("radial", [0.0, 0.0])
+    principal point). In the correction model (the default) x - dx(x) is inverted by
+    fixed-point iteration; in the projection model (OpenCV's, `rig import`) the measured
+    point is xc + dx(xc) directly."""
+    k1, k2, k3 = (list(cam.get("radial", [])) + [0.0, 0.0, 0.0])[:3]
     p1, p2 = cam.get("decentering", [0.0, 0.0])
-    x, y = xc.copy(), yc.copy()
-    for _ in range(20):
+
+    def distortion(x, y):
         r2 = x * x + y * y
-        dx = x * (k1 * r2 + k2 * r2 * r2) + p1 * (r2 + 2 * x * x) + 2 * p2 * x * y
-        dy = y * (k1 * r2 + k2 * r2 * r2) + 2 * p1 * x * y + p2 * (r2 + 2 * y * y)
+        radial = k1 * r2 + k2 * r2 * r2 + k3 * r2 * r2 * r2
+        return (x * radial + p1 * (r2 + 2 * x * x) + 2 * p2 * x * y,
+                y * radial + 2 * p1 * x * y + p2 * (r2 + 2 * y * y))
+
+    if cam.get("distortion_model", "correction") == "projection":
+        dx, dy = distortion(xc, yc)
         x, y = xc + dx, yc + dy
+    else:
+        x, y = xc.copy(), yc.copy()
+        for _ in range(20):
+            dx, dy = distortion(x, y)
+            x, y = xc + dx, yc + dy
     sx, sy = cam["pixel_size_mm"]
     x0, y0 = cam["principal_point_mm"]
     w, h = cam["width_px"], cam["height_px"]
