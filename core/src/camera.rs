@@ -100,7 +100,7 @@ pub mod io_param {
 
 /// Grid points per side on which [`Interior::validate`] checks that the distortion
 /// can be undone over the whole format.
-const FORMAT_CHECK_GRID: usize = 9;
+const FORMAT_CHECK_GRID: usize = 33;
 /// Largest disagreement, mm, between a format point and its round trip through
 /// [`Interior::correct`] and [`Interior::uncorrect`] that still counts as invertible.
 const FORMAT_CHECK_TOL_MM: f64 = 1e-9;
@@ -173,13 +173,33 @@ impl Interior {
                 let [x, y] = self.pixel_to_photo(c, r);
                 let [xc, yc] = self.correct(x, y);
                 let [xm, ym] = self.uncorrect(xc, yc)?;
-                if !((xm - x).abs() <= FORMAT_CHECK_TOL_MM && (ym - y).abs() <= FORMAT_CHECK_TOL_MM)
-                {
+                let back =
+                    (xm - x).abs() <= FORMAT_CHECK_TOL_MM && (ym - y).abs() <= FORMAT_CHECK_TOL_MM;
+                if !back || !self.orientation_preserved(x, y, xc, yc) {
                     return Err(CameraError::DistortionDiverged);
                 }
             }
         }
         Ok(())
+    }
+
+    /// Whether the distortion keeps its orientation at a point (measured `(x, y)`,
+    /// corrected `(xc, yc)`): the Jacobian of the closed-form direction has a positive
+    /// determinant. A round trip alone would accept a fold, where Newton finds a root
+    /// on the wrong branch.
+    fn orientation_preserved(&self, x: f64, y: f64, xc: f64, yc: f64) -> bool {
+        let (j, sign) = match self.distortion_model {
+            DistortionModel::Correction => (
+                self.distortion_jacobian(
+                    x - self.principal_point_mm[0],
+                    y - self.principal_point_mm[1],
+                ),
+                -1.0,
+            ),
+            DistortionModel::Projection => (self.distortion_jacobian(xc, yc), 1.0),
+        };
+        let det = (1.0 + sign * j[0][0]) * (1.0 + sign * j[1][1]) - j[0][1] * j[1][0];
+        det > 0.0
     }
 
     fn centre_px(&self) -> [f64; 2] {
@@ -245,9 +265,9 @@ impl Interior {
     ///
     /// Closed form for [`DistortionModel::Correction`]. For
     /// [`DistortionModel::Projection`] it is Newton's inverse of `xc + d(xc) = xb`,
-    /// which [`Interior::validate`] has checked converges everywhere on the format;
-    /// off the format, where it may not, the last iterate is returned, as OpenCV's
-    /// `undistortPoints` does.
+    /// which [`Interior::validate`] has checked on a dense grid of the format (it
+    /// converges, comes back, and the lens does not fold there); where it does not
+    /// converge the last iterate is returned, as OpenCV's `undistortPoints` does.
     pub fn correct(&self, x: f64, y: f64) -> [f64; 2] {
         let xb = x - self.principal_point_mm[0];
         let yb = y - self.principal_point_mm[1];
@@ -304,7 +324,8 @@ impl Interior {
             let (a, b) = (1.0 + sign * j[0][0], sign * j[0][1]);
             let (c, d) = (sign * j[1][0], 1.0 + sign * j[1][1]);
             let det = a * d - b * c;
-            if det.abs() < 1e-6 || !det.is_finite() {
+            // A non-positive determinant is a fold: no root there is the lens's.
+            if det.is_nan() || det <= 1e-6 {
                 return Err(Unsolved([zx, zy]));
             }
             let sx = (d * fx - b * fy) / det;
@@ -628,7 +649,7 @@ impl Rig {
 
     /// Length of the base, metres.
     pub fn base_length(&self) -> f64 {
-        Vector3::from(self.base_m).norm()
+        self.relative().base_length()
     }
 
     /// The right camera's orientation relative to the left.

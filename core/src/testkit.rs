@@ -95,6 +95,11 @@ pub struct Drive {
 /// two epochs (`span` = 0) or in exactly `span` consecutive epochs by both cameras,
 /// 0.3 px noise, and a fraction `gross` of observations with a 10..50 px blunder.
 pub fn drive(seed: u64, epochs: usize, n_points: usize, gross: f64, span: usize) -> Drive {
+    // Fewer epochs (or a longer span) could never see a point twice: no drive exists.
+    assert!(
+        epochs >= 2 && span <= epochs,
+        "a drive needs 2 epochs or more and span <= epochs"
+    );
     let mut rng = Rng(seed);
     let rig = test_rig();
     let relative = RelativeOrientation::from_rig(&rig);
@@ -112,7 +117,8 @@ pub fn drive(seed: u64, epochs: usize, n_points: usize, gross: f64, span: usize)
             [x, y, 1.5 + rng.uniform(-0.05, 0.05)],
         ));
     }
-    // Inside the format, with a hundredth of a millimetre to spare.
+    // Inside the format in corrected coordinates, a hundredth of a millimetre in:
+    // the drive observes corrected coordinates, so the lens does not enter.
     let half = [3.2 - 0.01, 2.4 - 0.01];
     let mut points = Vec::new();
     let mut observations = Vec::new();

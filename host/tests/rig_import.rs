@@ -200,6 +200,12 @@ fn calibrations_the_model_cannot_hold_are_refused_by_name() {
         1,
     );
     assert!(refused(&rational, "rational.yml").contains("rational"));
+    let nan = yml.replacen("536.07345313581845", ".nan", 1);
+    assert!(refused(&nan, "nan.yml").contains("M1: "));
+    // The left lens without its k3 folds the format's corners.
+    let folded = yml.replacen("0.25231221037868462", "0.", 1);
+    let e = refused(&folded, "folded.yml");
+    assert!(e.contains("the left camera") && e.contains("folds"), "{e}");
     let fisheye = "cam0:\n  camera_model: pinhole\n  intrinsics: [500, 500, 320, 240]\n  \
                    distortion_model: equidistant\n  distortion_coeffs: [0.1, 0.01, 0, 0]\n  \
                    resolution: [640, 480]\n";

@@ -270,6 +270,14 @@ fn a_lens_that_folds_the_format_is_refused() {
         ..projection_camera()
     };
     assert_eq!(cam.validate(), Err(CameraError::DistortionDiverged));
+    // An S-shaped radial curve (k1 < 0, k3 > 0, as OpenCV fits a wide lens) turns
+    // back and rises again within the format: every measured point still has a root
+    // that comes back, but some lie on the folded branch.
+    let s_curve = Interior {
+        radial: [-0.08, 0.0, 2e-4],
+        ..projection_camera()
+    };
+    assert_eq!(s_curve.validate(), Err(CameraError::DistortionDiverged));
     assert_eq!(projection_camera().validate(), Ok(()));
     assert_eq!(test_camera().validate(), Ok(()));
 }

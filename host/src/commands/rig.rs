@@ -4,7 +4,8 @@ use crate::dataset::calibration::{
 };
 use crate::dataset::rigfile::parse_rig_file;
 use crate::dataset::{default_datum, rig_toml_text};
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
+use phototraverse_core::camera::CameraError;
 use std::path::PathBuf;
 
 /// Work with rig files (`rig.toml`).
@@ -119,6 +120,17 @@ fn import(a: ImportArgs) -> Result<()> {
         }
     };
     let rig = stereo.to_rig(a.pixel_size_mm);
+    for (side, cam) in [("left", &rig.left), ("right", &rig.right)] {
+        cam.validate().map_err(|e| {
+            let why = match e {
+                CameraError::DistortionDiverged => "its distortion folds the image over itself \
+                     (a polynomial extrapolated past its data, or k3 left out): no inverse exists"
+                    .to_string(),
+                e => e.to_string(),
+            };
+            anyhow!("{}: the {side} camera: {why}", a.files[0].display())
+        })?;
+    }
     let text = rig_toml_text(&rig, &default_datum());
     // What is written must read back: the same checks as every run's.
     parse_rig_file(&text, &a.output)?;

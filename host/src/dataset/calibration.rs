@@ -151,26 +151,36 @@ impl Fields {
             .ok_or_else(|| self.error(format!("no {} in the calibration", names.join(" or "))))
     }
 
-    /// A matrix of `rows x cols` numbers under one of `names`.
+    /// A matrix of `rows x cols` finite numbers under one of `names` (a vector may be
+    /// stated as a row or a column), and the file it came from.
     fn matrix(
         &self,
         names: &[&str],
         rows: usize,
         cols: usize,
-    ) -> Result<Vec<f64>, CalibrationError> {
+    ) -> Result<(Vec<f64>, PathBuf), CalibrationError> {
         let (value, path) = self.require(names)?;
+        let bad = |problem: String| CalibrationError {
+            path: path.to_path_buf(),
+            problem: format!("{}: {problem}", names[0]),
+        };
         let data = value.numbers();
-        if data.len() != rows * cols || data.iter().any(|v| !v.is_finite()) {
-            return Err(CalibrationError {
-                path: path.to_path_buf(),
-                problem: format!(
-                    "{} must be {rows}x{cols} finite numbers, found {} values",
-                    names[0],
-                    data.len()
-                ),
-            });
+        let shape_ok = match value {
+            Value::Matrix {
+                rows: r, cols: c, ..
+            } => (*r, *c) == (rows, cols) || (rows.min(cols) == 1 && r * c == rows * cols),
+            Value::Numbers(_) => true,
+        };
+        if !shape_ok || data.len() != rows * cols {
+            return Err(bad(format!(
+                "must be a {rows}x{cols} matrix, found {} values",
+                data.len()
+            )));
         }
-        Ok(data.to_vec())
+        if let Some(v) = data.iter().find(|v| !v.is_finite()) {
+            return Err(bad(format!("holds the non-finite value {v}")));
+        }
+        Ok((data.to_vec(), path.to_path_buf()))
     }
 }
 
@@ -270,9 +280,8 @@ fn xml_fields(text: &str, path: &Path) -> Result<Vec<(String, Value)>, Calibrati
         } else {
             node.text().and_then(numbers).map(Value::Numbers)
         };
-        if let Some(v) = value {
-            out.push((name, v));
-        }
+        // A value that does not read stays, empty, so that the error names it.
+        out.push((name, value.unwrap_or(Value::Numbers(Vec::new()))));
     }
     Ok(out)
 }
@@ -288,7 +297,12 @@ fn opencv_fields(paths: &[PathBuf]) -> Result<Fields, CalibrationError> {
             doc.as_hash()
                 .map(|h| {
                     h.iter()
-                        .filter_map(|(k, v)| Some((k.as_str()?.to_string(), yaml_value(v)?)))
+                        .filter_map(|(k, v)| {
+                            // A value that does not read stays, empty, so that the
+                            // error names it.
+                            let value = yaml_value(v).unwrap_or(Value::Numbers(Vec::new()));
+                            Some((k.as_str()?.to_string(), value))
+                        })
                         .collect()
                 })
                 .unwrap_or_default()
@@ -338,17 +352,25 @@ fn opencv_camera(
     distortion: &[&str],
     size: (u32, u32),
 ) -> Result<PixelCamera, CalibrationError> {
-    let k = fields.matrix(matrix, 3, 3)?;
+    let (k, k_path) = fields.matrix(matrix, 3, 3)?;
     let (d, path) = fields.require(distortion)?;
     let (radial, tangential) = opencv_distortion(d.numbers(), distortion[0], path)?;
+    let bad = |problem: String| CalibrationError {
+        path: k_path.clone(),
+        problem: format!("{}: {problem}", matrix[0]),
+    };
     if k[1] != 0.0 {
-        return Err(fields.error(format!(
-            "{} has a skew term ({}): the photogrammetric model has none",
-            matrix[0], k[1]
+        return Err(bad(format!(
+            "has a skew term ({}): the photogrammetric model has none",
+            k[1]
         )));
     }
-    camera(size, [k[0], k[4], k[2], k[5]], radial, tangential)
-        .map_err(|p| fields.error(format!("{}: {p}", matrix[0])))
+    if k[3] != 0.0 || k[6..] != [0.0, 0.0, 1.0] {
+        return Err(bad(
+            "is not a camera matrix [fx 0 cx; 0 fy cy; 0 0 1]".into()
+        ));
+    }
+    camera(size, [k[0], k[4], k[2], k[5]], radial, tangential).map_err(bad)
 }
 
 fn camera(
@@ -379,34 +401,44 @@ fn camera(
     })
 }
 
+/// A pixel count: a positive integer.
+fn pixels(v: f64) -> Option<u32> {
+    (v >= 1.0 && v <= u32::MAX as f64 && v.fract() == 0.0).then_some(v as u32)
+}
+
 /// The image size: `image_width`/`image_height` or `imageSize`, else `size`.
 fn opencv_size(fields: &Fields, size: Option<(u32, u32)>) -> Result<(u32, u32), CalibrationError> {
-    let pair = |v: &Value| match v.numbers() {
-        [w, h] => Some((*w as u32, *h as u32)),
-        _ => None,
-    };
     let single = |names: &[&str]| {
         fields
             .any(names)
-            .and_then(|(v, _)| v.numbers().first().copied())
+            .map(|(v, _)| v.numbers().first().copied().unwrap_or(f64::NAN))
     };
-    if let (Some(w), Some(h)) = (
+    let stated = match (
         single(&["image_width", "width"]),
         single(&["image_height", "height"]),
     ) {
-        return Ok((w as u32, h as u32));
+        (Some(w), Some(h)) => Some([w, h]),
+        _ => fields
+            .any(&["imageSize", "image_size"])
+            .map(|(v, _)| match v.numbers() {
+                [w, h] => [*w, *h],
+                _ => [f64::NAN; 2],
+            }),
+    };
+    match stated {
+        Some([w, h]) => match (pixels(w), pixels(h)) {
+            (Some(w), Some(h)) => Ok((w, h)),
+            _ => Err(fields.error(format!(
+                "image size {w} x {h}: width and height must be positive integers"
+            ))),
+        },
+        None => size.ok_or_else(|| {
+            fields.error(
+                "no image size (image_width and image_height, or imageSize): give --size WxH"
+                    .into(),
+            )
+        }),
     }
-    if let Some(s) = fields
-        .any(&["imageSize", "image_size"])
-        .and_then(|(v, _)| pair(v))
-    {
-        return Ok(s);
-    }
-    size.ok_or_else(|| {
-        fields.error(
-            "no image size (image_width and image_height, or imageSize): give --size WxH".into(),
-        )
-    })
 }
 
 /// Reads OpenCV FileStorage files (YAML or XML; an intrinsics and an extrinsics file
@@ -431,9 +463,12 @@ pub fn read_opencv(
         &["D2", "distCoeffs2"],
         size,
     )?;
-    let r = fields.matrix(&["R"], 3, 3)?;
-    let t = fields.matrix(&["T"], 3, 1)?;
-    stereo(left, right, &r, &t, translation_unit_m).map_err(|p| fields.error(p))
+    let (r, r_path) = fields.matrix(&["R"], 3, 3)?;
+    let (t, _) = fields.matrix(&["T"], 3, 1)?;
+    stereo(left, right, &r, &t, translation_unit_m).map_err(|problem| CalibrationError {
+        path: r_path,
+        problem,
+    })
 }
 
 fn stereo(
@@ -516,8 +551,12 @@ pub fn read_kalibr(
                 "cam{i}: intrinsics must be [fu, fv, pu, pv] and resolution [width, height]"
             )));
         };
-        camera((*w as u32, *h as u32), k, radial, tangential)
-            .map_err(|p| err(format!("cam{i}: {p}")))
+        let (Some(w), Some(h)) = (pixels(*w), pixels(*h)) else {
+            return Err(err(format!(
+                "cam{i}: resolution must be two positive integers"
+            )));
+        };
+        camera((w, h), k, radial, tangential).map_err(|p| err(format!("cam{i}: {p}")))
     };
     let left = cam(first)?;
     let right = cam(second)?;

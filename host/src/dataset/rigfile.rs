@@ -155,7 +155,7 @@ fn camera_from(c: &CameraToml, name: &'static str, path: &Path) -> Result<Interi
             c.pixel_size_mm
         )));
     }
-    if c.radial.len() > 3 {
+    if c.radial.len() == 1 || c.radial.len() > 3 {
         return Err(bad(format!(
             "radial has {} terms; it takes [k1, k2] or [k1, k2, k3]",
             c.radial.len()

@@ -175,7 +175,11 @@ pub(crate) fn attitude_series(report: &RunReport) -> Vec<Series> {
         points: report
             .epochs
             .iter()
-            .map(|e| (e.epoch as f64, f(&e.left) - f(&first.left)))
+            .map(|e| {
+                // Wrapped into (-180, 180]: kappa crossing +-180 deg is no jump of 360.
+                let d = f(&e.left) - f(&first.left);
+                (e.epoch as f64, d - 360.0 * (d / 360.0).round())
+            })
             .collect(),
     };
     vec![

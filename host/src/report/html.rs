@@ -118,7 +118,7 @@ fn chart(
         for (i, s) in series.iter().enumerate() {
             let color = PALETTE[i % PALETTE.len()];
             let points = s.points.iter().copied();
-            let drawn = match mark {
+            match mark {
                 Mark::Lines => chart
                     .draw_series(LineSeries::new(points, color.stroke_width(2)))
                     .map_err(|e| anyhow!("{e:?}"))?,
@@ -126,9 +126,6 @@ fn chart(
                     .draw_series(points.map(|p| Circle::new(p, 2, color.filled())))
                     .map_err(|e| anyhow!("{e:?}"))?,
             };
-            drawn
-                .label(s.name.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
         }
         root.present().map_err(|e| anyhow!("{e:?}"))?;
     }
@@ -760,13 +757,12 @@ pub fn write_html(path: &Path, report: &RunReport) -> Result<()> {
          <style>body{{font-family:sans-serif;max-width:780px;margin:auto}}\
          table{{border-collapse:collapse}}td,th{{border:1px solid #ccc;padding:2px 6px;text-align:right}}\
          table.summary td{{text-align:left}}p.legend{{margin-top:0;font-size:90%}}</style>\
-         </head><body><h1>phototraverse: {}</h1><p>mode {}, {} epochs of {}x{} px, {} flagged.</p>",
+         </head><body><h1>phototraverse: {}</h1><p>mode {}, {} epochs of {}x{} px.</p>",
         html_escape(&report.dataset),
         html_escape(&report.mode),
         report.epochs.len(),
         report.image_width,
         report.image_height,
-        report.flagged_epochs()
     );
     let _ = write!(page, "<h2>Summary</h2>{}", glance::summary_table(report));
     if let Some(t) = glance::flagged_table(report) {
