@@ -698,6 +698,14 @@ impl Camera {
     pub fn index(self) -> usize {
         self as usize
     }
+
+    /// `left` or `right`, as the outputs' camera columns write it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Camera::Left => "left",
+            Camera::Right => "right",
+        }
+    }
 }
 
 /// The right camera's orientation relative to the left (docs/conventions.md, "Stereo

@@ -147,7 +147,7 @@ fn adjust_cli_recovers_the_truth_and_flags_the_blunders() {
     for row in csv
         .lines()
         .skip(1)
-        .filter(|r| r.split(',').nth(1) == Some("L"))
+        .filter(|r| r.split(',').nth(1) == Some("left"))
     {
         let v: Vec<f64> = row.split(',').filter_map(|x| x.parse().ok()).collect();
         let e = v[0] as usize;

@@ -51,7 +51,7 @@ fn cam_name(c: Camera) -> &'static str {
 pub fn write_outputs(out: &Path, a: &Adjusted) -> Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create", out.display()))?;
     let mut o = String::from(
-        "epoch,camera,omega_deg,phi_deg,kappa_deg,X_m,Y_m,Z_m,s_omega_deg,s_phi_deg,s_kappa_deg,s_X_m,s_Y_m,s_Z_m\n",
+        "epoch,camera,omega_deg,phi_deg,kappa_deg,X_m,Y_m,Z_m,sd_omega_deg,sd_phi_deg,sd_kappa_deg,sd_X_m,sd_Y_m,sd_Z_m\n",
     );
     for im in &a.images {
         let p = &im.pose;
@@ -60,7 +60,7 @@ pub fn write_outputs(out: &Path, a: &Adjusted) -> Result<()> {
             o,
             "{},{},{:.6},{:.6},{:.6},{:.5},{:.5},{:.5},{:.6},{:.6},{:.6},{:.5},{:.5},{:.5}",
             im.epoch,
-            cam_name(im.camera),
+            im.camera.name(),
             p.omega.to_degrees(),
             p.phi.to_degrees(),
             p.kappa.to_degrees(),
@@ -76,7 +76,7 @@ pub fn write_outputs(out: &Path, a: &Adjusted) -> Result<()> {
         )?;
     }
     std::fs::write(out.join("orientations.csv"), o)?;
-    let mut p = String::from("point,X_m,Y_m,Z_m,s_X_m,s_Y_m,s_Z_m,observations\n");
+    let mut p = String::from("point,X_m,Y_m,Z_m,sd_X_m,sd_Y_m,sd_Z_m,observations\n");
     for pt in &a.points {
         writeln!(
             p,
