@@ -32,17 +32,12 @@ fn start(s: &Scene, seed: u64) -> (Vec<[f64; 6]>, Vec<[f64; 3]>) {
         .iter()
         .enumerate()
         .map(|(k, p)| {
-            let mut q = p.to_params();
-            if k > 0 {
-                for (i, qi) in q.iter_mut().enumerate() {
-                    *qi += if i < 3 {
-                        rng.uniform(-0.01, 0.01)
-                    } else {
-                        rng.uniform(-0.1, 0.1)
-                    };
-                }
-            }
-            q
+            let start = if k > 0 {
+                rng.perturbed(p, 0.01, 0.1)
+            } else {
+                *p
+            };
+            start.to_params()
         })
         .collect();
     let points = s

@@ -34,6 +34,17 @@ impl Rng {
         libm::sqrt(-2.0 * libm::log(u1)) * libm::cos(2.0 * core::f64::consts::PI * u2)
     }
 
+    /// `pose` moved by up to `angle_rad` on each angle and `metres` on each coordinate
+    /// of the centre: a start value a few steps from the truth.
+    pub fn perturbed(&mut self, pose: &Pose, angle_rad: f64, metres: f64) -> Pose {
+        let mut q = pose.to_params();
+        for (i, qi) in q.iter_mut().enumerate() {
+            let off = if i < 3 { angle_rad } else { metres };
+            *qi += self.uniform(-off, off);
+        }
+        Pose::from_params(&q)
+    }
+
     /// Uniform integer in `0..n` (n > 0).
     pub fn below(&mut self, n: usize) -> usize {
         (self.uniform(0.0, n as f64) as usize).min(n - 1)

@@ -524,7 +524,7 @@ impl Block {
         std::fs::write(dir.join("images.txt"), t)?;
         let mut o = String::from("# point epoch camera(L|R) column row  (pixels, (0,0) = centre of the top-left pixel)\n");
         for ob in &self.observations {
-            let c = if ob.camera == Camera::Left { "L" } else { "R" };
+            let c = camera_code(ob.camera);
             writeln!(
                 o,
                 "{} {} {c} {:.3} {:.3}",
@@ -855,4 +855,11 @@ fn right_std(left: &Pose, rig: &RelativeOrientation, cov: &[f64; 36]) -> [f64; 6
         out[i] = v.max(0.0).sqrt();
     }
     out
+}
+/// The observation file's camera code, `L` or `R`.
+pub fn camera_code(c: Camera) -> &'static str {
+    match c {
+        Camera::Left => "L",
+        Camera::Right => "R",
+    }
 }

@@ -49,19 +49,14 @@ fn example() -> (Block, Vec<Pose>, Vec<usize>) {
         .poses
         .iter()
         .enumerate()
-        .map(|(k, t)| {
-            let mut q = t.to_params();
-            if k > 0 {
-                for (i, qi) in q.iter_mut().enumerate() {
-                    let off = if i < 3 { 0.005 } else { 0.05 };
-                    *qi += rng.uniform(-off, off);
-                }
-            }
-            Image {
-                epoch: k as u32,
-                time_s: 0.2 * k as f64,
-                pose: Pose::from_params(&q),
-            }
+        .map(|(k, t)| Image {
+            epoch: k as u32,
+            time_s: 0.2 * k as f64,
+            pose: if k > 0 {
+                rng.perturbed(t, 0.005, 0.05)
+            } else {
+                *t
+            },
         })
         .collect();
     let block = Block {

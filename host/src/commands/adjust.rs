@@ -1,8 +1,7 @@
 //! `phototraverse adjust BLOCK --out DIR`: bundle adjustment of a block
 //! described in files (docs/block-format.md), with the core's window.
-use crate::block::{adjust, Adjusted, Block};
+use crate::block::{adjust, camera_code, Adjusted, Block};
 use anyhow::{Context, Result};
-use phototraverse_core::camera::Camera;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -37,14 +36,6 @@ pub fn run(args: Args) -> Result<()> {
     );
     println!("wrote {}", args.out.display());
     Ok(())
-}
-
-fn cam_name(c: Camera) -> &'static str {
-    if c == Camera::Left {
-        "L"
-    } else {
-        "R"
-    }
 }
 
 /// Writes orientations.csv, points.csv, flagged.csv and report.json.
@@ -102,7 +93,7 @@ pub fn write_outputs(out: &Path, a: &Adjusted) -> Result<()> {
             ob.line,
             ob.point,
             ob.epoch,
-            cam_name(ob.camera),
+            camera_code(ob.camera),
             ob.px[0],
             ob.px[1],
             fl.residual_px[0],

@@ -46,17 +46,12 @@ pub(crate) fn load<'a>(
     let mut rng = Rng(seed);
     let mut w = Window::new(cfg, &s.rig, arena).unwrap();
     for (k, p) in s.poses.iter().enumerate() {
-        let mut q = p.to_params();
-        if k > 0 {
-            for (i, qi) in q.iter_mut().enumerate() {
-                *qi += if i < 3 {
-                    rng.uniform(-0.01, 0.01)
-                } else {
-                    rng.uniform(-0.1, 0.1)
-                };
-            }
-        }
-        w.add_epoch(&Pose::from_params(&q), k as f64 * 0.2).unwrap();
+        let start = if k > 0 {
+            rng.perturbed(p, 0.01, 0.1)
+        } else {
+            *p
+        };
+        w.add_epoch(&start, k as f64 * 0.2).unwrap();
     }
     let ids: Vec<u32> = s
         .points
