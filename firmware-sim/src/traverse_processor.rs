@@ -120,7 +120,8 @@ pub fn epoch_result(epoch: u32, out: &traverse::EpochOutput) -> EpochResult {
         epoch,
         status,
         pose: out.left.to_params(),
-        sigma: out.std.unwrap_or([0.0; 6]),
+        sigma: out.std.map_or([0.0; 6], |s| s.map(|v| v as f32)),
+        right_sigma: out.right_std.map_or([0.0; 6], |s| s.map(|v| v as f32)),
         flags: result_flags(out.flags),
         counts: Counts {
             keypoints: out.keypoints,

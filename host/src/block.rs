@@ -10,7 +10,8 @@ use anyhow::{anyhow, Context, Result};
 use phototraverse_core::adjust::geometry::camera_pose;
 use phototraverse_core::adjust::weighting::{weights, Scheme};
 use phototraverse_core::adjust::{
-    intersect, AdjustConfig, ConstraintSigmas, Observation, Ray, Report, Robust, Window,
+    intersect, right_camera_covariance, standard_deviations, AdjustConfig, ConstraintSigmas,
+    Observation, Ray, Report, Robust, Window,
 };
 use phototraverse_core::budget::{Arena, MemoryBudget};
 use phototraverse_core::camera::{Camera, RelativeOrientation};
@@ -717,7 +718,6 @@ pub fn adjust(block: &Block) -> Result<Adjusted> {
     for o in &block.observations {
         partner.insert((o.point, o.epoch, o.camera as u8), corrected(&block.rig, o));
     }
-    let mut obs_of_index = Vec::new();
     for (i, o) in block.observations.iter().enumerate() {
         let Some(&pid) = index.get(&o.point) else {
             continue;
@@ -754,7 +754,6 @@ pub fn adjust(block: &Block) -> Result<Adjusted> {
         ob.tag = i as u32;
         w.add_observation(ob)
             .map_err(|e| anyhow!("observations.txt:{}: {e}", o.line))?;
-        obs_of_index.push(i);
     }
     let report = w.solve().map_err(|e| match e {
         phototraverse_core::adjust::AdjustError::Singular { epoch } => {
@@ -781,7 +780,7 @@ pub fn adjust(block: &Block) -> Result<Adjusted> {
             epoch,
             camera: Camera::Right,
             pose: right,
-            std: right_std(&left, &rig_now, &cov),
+            std: standard_deviations(&right_camera_covariance(&left, &rig_now, &cov)),
         });
     }
     let mut points = Vec::new();
@@ -815,7 +814,6 @@ pub fn adjust(block: &Block) -> Result<Adjusted> {
             residual_px: [r[0] / cam.pixel_size_mm[0], -r[1] / cam.pixel_size_mm[1]],
         });
     }
-    let _ = obs_of_index;
     Ok(Adjusted {
         report,
         images,
@@ -828,34 +826,6 @@ pub fn adjust(block: &Block) -> Result<Adjusted> {
     })
 }
 
-/// Standard deviations of the right camera from the left camera's covariance
-/// (rig held at its estimate): `J Sigma J^T` with `J` by central differences.
-fn right_std(left: &Pose, rig: &RelativeOrientation, cov: &[f64; 36]) -> [f64; 6] {
-    let h = 1e-7;
-    let mut j = [[0.0; 6]; 6];
-    for k in 0..6 {
-        let mut a = left.to_params();
-        let mut b = left.to_params();
-        a[k] += h;
-        b[k] -= h;
-        let pa = camera_pose(&Pose::from_params(&a), rig, Camera::Right).to_params();
-        let pb = camera_pose(&Pose::from_params(&b), rig, Camera::Right).to_params();
-        for i in 0..6 {
-            j[i][k] = (pa[i] - pb[i]) / (2.0 * h);
-        }
-    }
-    let mut out = [0.0; 6];
-    for i in 0..6 {
-        let mut v = 0.0;
-        for a in 0..6 {
-            for b in 0..6 {
-                v += j[i][a] * cov[a * 6 + b] * j[i][b];
-            }
-        }
-        out[i] = v.max(0.0).sqrt();
-    }
-    out
-}
 /// The observation file's camera code, `L` or `R`.
 pub fn camera_code(c: Camera) -> &'static str {
     match c {

@@ -327,7 +327,7 @@ impl<'d> Run<'d> {
         }
         let left = Pose::from_params(&r.pose);
         let right = self.rig.right_pose(&left);
-        let sigma = (r.sigma != [0.0; 6]).then_some(r.sigma);
+        let sigma = |s: [f32; 6]| (s != [0.0; 6]).then(|| s.map(f64::from));
         let stage_ms = timings
             .map(|t| {
                 stage::NAMES
@@ -344,8 +344,8 @@ impl<'d> Run<'d> {
             time: Some(time),
             status,
             note: flag_note(r.flags),
-            left: CameraEop::from_pose(&left, sigma),
-            right: CameraEop::from_pose(&right, None),
+            left: CameraEop::from_pose(&left, sigma(r.sigma)),
+            right: CameraEop::from_pose(&right, sigma(r.right_sigma)),
             sigma0: r.adjustment().map(|a| a.sigma0).filter(|s| *s > 0.0),
             chi2_passed: test.map(|t| t.passed),
             chi2: test.map(EpochChi2::from),

@@ -219,7 +219,9 @@ pub struct EpochResultRecord {
     /// The wire's status code (`docs/protocol.md`, Result).
     pub status: u8,
     pub pose: [f64; 6],
+    /// Standard deviations of the left and right camera's pose (zero: not available).
     pub sigma: [f64; 6],
+    pub right_sigma: [f64; 6],
     /// The wire's flag bits.
     pub flags: u32,
     pub keypoints: [u32; 2],
@@ -663,7 +665,8 @@ impl<T: Transport> Session<T> {
                     epoch: r.epoch,
                     status: r.status.code(),
                     pose: r.pose,
-                    sigma: r.sigma,
+                    sigma: r.sigma.map(f64::from),
+                    right_sigma: r.right_sigma.map(f64::from),
                     flags: r.flags.bits(),
                     keypoints: c.keypoints,
                     stereo_matches: c.stereo_matches,

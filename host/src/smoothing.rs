@@ -143,7 +143,8 @@ fn estimate_step_variance(chains: &[Chain]) -> f64 {
 }
 
 /// Puts the smoothed centres and their standard deviations into `epochs` (keeping the
-/// firmware's centres as `realtime_centre_m`), places the right cameras again and
+/// firmware's centres as `realtime_centre_m`), places the right cameras (and their
+/// centres' standard deviations) again and
 /// updates the fixes' residuals. Returns how far the centres moved: RMS and largest.
 fn apply(
     epochs: &mut [EpochRecord],
@@ -162,9 +163,16 @@ fn apply(
         (e.left.x, e.left.y, e.left.z) = (new[0], new[1], new[2]);
         // An epoch without the firmware's precision (the datum epoch, a predicted one)
         // has no attitude precision either: it stays without.
+        // The right centre keeps what the rig adds to the left's variance (the
+        // attitude's uncertainty turning the base), on the smoothed left variance.
         if let Some(sigma) = e.left.sigma.as_mut() {
             for c in 0..3 {
-                sigma[3 + c] = solved[c].var[k].sqrt();
+                let smoothed = solved[c].var[k];
+                if let Some(right) = e.right.sigma.as_mut() {
+                    let added = right[3 + c].powi(2) - sigma[3 + c].powi(2);
+                    right[3 + c] = (smoothed + added).max(0.0).sqrt();
+                }
+                sigma[3 + c] = smoothed.sqrt();
             }
         }
         let right = right_of(&e.left.to_pose());
@@ -408,12 +416,26 @@ mod tests {
             };
             let sd = (0.003f64.powi(2) + grown).sqrt();
             r.left.sigma = Some([1e-4, 1e-4, 1e-4, sd, sd, sd]);
+            // The rig adds (4 mm)^2 to the right centre's variance.
+            let right = (sd * sd + 1.6e-5).sqrt();
+            r.right.sigma = Some([1e-4, 1e-4, 1e-4, right, right, right]);
         }
         smooth_over_fixes(&mut records, [0.0; 3], |p| *p).unwrap();
         let worst = (40..=60)
             .map(|k| error(&records[k], truth[k]))
             .fold(0.0, f64::max);
         assert!(worst < 0.01, "largest error inside the outage {worst}");
+        // The right centres' standard deviations follow the smoothed left ones and keep
+        // what the rig adds.
+        for r in &records {
+            let (l, rt) = (r.left.sigma.unwrap(), r.right.sigma.unwrap());
+            for c in 3..6 {
+                assert!(
+                    (rt[c].powi(2) - l[c].powi(2) - 1.6e-5).abs() < 1e-12,
+                    "{l:?} {rt:?}"
+                );
+            }
+        }
     }
 
     #[test]

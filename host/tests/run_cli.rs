@@ -174,6 +174,30 @@ fn run_writes_tie_points_efoto_and_the_residual_histogram() {
         median < 0.5 && p90 < 2.0,
         "reprojection median {median} px, p90 {p90} px"
     );
+    // Both cameras carry their standard deviations: the right camera's attitude is as
+    // uncertain as the left's (the rig's relative rotation is small), its centre
+    // about as uncertain (the attitude's uncertainty turns the 0.54 m base).
+    let eop_sd = std::fs::read_to_string(out.join("eop.csv")).unwrap();
+    let sd_rows: Vec<Vec<Option<f64>>> = eop_sd
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').skip(8).take(6).map(|v| v.parse().ok()).collect())
+        .collect();
+    let mut with_sd = 0;
+    for pair in sd_rows.chunks(2) {
+        let (l, r) = (&pair[0], &pair[1]);
+        assert_eq!(l[0].is_some(), r[0].is_some(), "{l:?} {r:?}");
+        let (Some(_), Some(_)) = (l[0], r[0]) else {
+            continue;
+        };
+        with_sd += 1;
+        for k in 0..6 {
+            let ratio = r[k].unwrap() / l[k].unwrap();
+            let range = if k < 3 { 0.95..1.05 } else { 0.5..2.0 };
+            assert!(range.contains(&ratio), "sd {k}: {l:?} {r:?}");
+        }
+    }
+    assert!(with_sd >= FRAMES - 1, "{with_sd} epochs with standard deviations");
 
     // The COLMAP model has every image once, named by its path in the dataset, and
     // every exported measurement once in the tracks of its points.

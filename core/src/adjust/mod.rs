@@ -16,6 +16,8 @@
 //! - [`constraints`]: datum/prior, base length, relative orientation prior,
 //!   motion smoothness, odometer distance, GNSS position.
 //! - [`weighting`]: seed 000 weighting schemes and the robust re-weighting.
+//! - [`propagation`]: a pose covariance carried through a rigid connection (the
+//!   newest fixed epoch to the window's, the left camera to the right).
 //! - [`quality`]: sigma0, chi-square quantiles and the global test.
 //! - [`window`]: the sliding-window adjuster (storage from the arena, normal
 //!   equations with the Schur complement, Levenberg-Marquardt).
@@ -34,6 +36,7 @@ pub mod cholesky;
 pub mod constraints;
 pub mod geometry;
 pub mod intersection;
+pub mod propagation;
 pub mod quality;
 pub mod resection;
 pub mod weighting;
@@ -46,6 +49,7 @@ mod tests;
 
 pub use geometry::InteriorCorrections;
 pub use intersection::{intersect, IntersectError, Intersection, Ray};
+pub use propagation::{right_camera_covariance, standard_deviations};
 pub use resection::{resect, Correspondence, ResectionConfig, ResectionError, ResectionResult};
 pub use window::{
     AdjustConfig, AdjustError, CalibrationTest, ConstraintSigmas, InteriorSigmas, Observation,

@@ -32,8 +32,9 @@ pub use packet::{
     encode_packet, EncodeError, Header, Packet, PacketBuffers, PacketError, CRC_LEN, HEADER_LEN,
 };
 
-/// Version byte of every packet header.
-pub const PROTOCOL_VERSION: u8 = 1;
+/// Version byte of every packet header. Version 2: a Result carries both cameras'
+/// standard deviations, as `f32`.
+pub const PROTOCOL_VERSION: u8 = 2;
 /// Largest payload of any packet.
 pub const MAX_PAYLOAD: usize = 4096;
 /// Largest packet before COBS (header, payload, CRC).

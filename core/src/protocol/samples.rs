@@ -128,6 +128,7 @@ pub fn sample_result() -> EpochResult {
         status: ResultStatus::Flagged,
         pose: [1.5, 0.1, -0.2, 3.0, 40.0, 1.6],
         sigma: [1e-4, 2e-4, 3e-4, 0.01, 0.02, 0.03],
+        right_sigma: [1e-4, 2e-4, 3e-4, 0.011, 0.021, 0.032],
         flags: ResultFlags::FEW_TIE_POINTS | ResultFlags::CHI2 | ResultFlags::ROTATION_FROM_MATCHES,
         counts: Counts {
             keypoints: [900, 880],

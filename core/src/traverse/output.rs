@@ -99,6 +99,10 @@ pub struct EpochOutput {
     /// Standard deviations of the left pose (omega, phi, kappa rad; X, Y, Z m) with
     /// respect to the datum ([`crate::adjust::Window::epoch_absolute_std`]).
     pub std: Option<[f64; 6]>,
+    /// Standard deviations of the right pose, from the left pose's covariance carried
+    /// through the rig's relative orientation
+    /// ([`crate::adjust::right_camera_covariance`]).
+    pub right_std: Option<[f64; 6]>,
     /// Standard deviations of the left perspective centre (X, Y, Z m) with the poses
     /// that left the window held exact: its precision relative to the recent past, what
     /// a velocity from neighbouring epochs is uncertain by.

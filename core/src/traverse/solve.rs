@@ -1,6 +1,7 @@
 //! The epoch in the adjustment: its tie points as observations (new points by
 //! intersection), the window's solution, the slide, and the calibration check.
 use super::*;
+use crate::adjust::{right_camera_covariance, standard_deviations};
 
 impl Traverse<'_> {
     /// Initial values, window update and adjustment; true when the epoch was adjusted.
@@ -203,7 +204,11 @@ impl Traverse<'_> {
             out.left = pose;
             out.right = self.right_of(&pose);
         }
-        out.std = self.window.epoch_absolute_std(last);
+        let cov = self.window.epoch_absolute_covariance(last);
+        out.std = cov.map(|c| standard_deviations(&c));
+        out.right_std = cov.map(|c| {
+            standard_deviations(&right_camera_covariance(&out.left, &self.window.rig(), &c))
+        });
         out.relative_std_m = self
             .window
             .epoch_relative_std(last)

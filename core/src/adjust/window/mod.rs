@@ -27,6 +27,7 @@ use super::geometry::{
     corrected_focal, project_epoch, project_xy, project_xy_with, right_rotation,
     shift_principal_point, with_interior, EpochRotations, InteriorCorrections, Partials, Rotations,
 };
+use super::propagation::{propagate, rigid_transport, standard_deviations};
 use super::quality::ChiSquareTest;
 use super::weighting::{cauchy_factor, median_by_rank, CHI2_2_MEDIAN, SEED_REWEIGHT};
 use crate::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget, OutOfMemory};
@@ -723,44 +724,6 @@ fn gnss_residual(ep: &EpochSlot) -> ([f64; 3], [[f64; 6]; 3]) {
         j[k][3 + k] = 1.0;
     }
     (r, j)
-}
-
-/// Jacobian (6x6, row-major) of the pose `to` with respect to the pose `from` when both
-/// move as one rigid body with `from`: a small rotation `d` (object frame) of `from`
-/// turns `to` by the same `d` and moves its centre by `d x (C_to - C_from)`. In the
-/// parameters (omega, phi, kappa, X, Y, Z): angles `E_to^-1 E_from`, centre
-/// `-[C_to - C_from]x E_from` and the identity, with `E` the angles' rotation vector.
-fn rigid_transport(from: &[f64; 6], to: &[f64; 6]) -> [f64; 36] {
-    let e_from = angle_rates(from);
-    let e_to_inv = angle_rates(to)
-        .try_inverse()
-        .unwrap_or_else(Matrix3::identity);
-    let a = e_to_inv * e_from;
-    let d = Vector3::new(to[3] - from[3], to[4] - from[4], to[5] - from[5]);
-    let lever = -d.cross_matrix() * e_from;
-    let mut j = [0.0; 36];
-    for r in 0..3 {
-        for c in 0..3 {
-            j[r * 6 + c] = a[(r, c)];
-            j[(r + 3) * 6 + c] = lever[(r, c)];
-        }
-        j[(r + 3) * 6 + r + 3] = 1.0;
-    }
-    j
-}
-
-/// `E` of the angles in `p`: column `i` is the object-frame rotation vector of a unit
-/// change of angle `i` (`dR R^T = [E da]x`, `R = M^T` camera to object).
-fn angle_rates(p: &[f64; 6]) -> Matrix3<f64> {
-    let (m, d) = crate::camera::rotation_with_derivatives(p[0], p[1], p[2]);
-    let mut e = Matrix3::zeros();
-    for (i, di) in d.iter().enumerate() {
-        let s = di.transpose() * m;
-        e[(0, i)] = s[(2, 1)];
-        e[(1, i)] = s[(0, 2)];
-        e[(2, i)] = s[(1, 0)];
-    }
-    e
 }
 
 /// Inverts a symmetric positive definite 6x6 (row-major); false when not SPD.

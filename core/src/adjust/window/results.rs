@@ -56,16 +56,9 @@ impl<'a> Window<'a> {
             return cov;
         };
         let j = rigid_transport(&anchor.params, &self.epochs[i].params);
-        let mut jc = [0.0; 36];
-        for r in 0..6 {
-            for c in 0..6 {
-                jc[r * 6 + c] = (0..6).map(|k| j[r * 6 + k] * anchor.cov[k * 6 + c]).sum();
-            }
-        }
-        for r in 0..6 {
-            for c in 0..6 {
-                cov[r * 6 + c] += (0..6).map(|k| jc[r * 6 + k] * j[c * 6 + k]).sum::<f64>();
-            }
+        let carried = propagate(&j, &anchor.cov);
+        for (c, a) in cov.iter_mut().zip(carried) {
+            *c += a;
         }
         cov
     }
@@ -105,8 +98,7 @@ impl<'a> Window<'a> {
     /// Standard deviations of slot `i` with respect to the datum (omega, phi, kappa
     /// rad; X, Y, Z m): [`Self::epoch_absolute_covariance`].
     pub fn epoch_absolute_std(&self, i: usize) -> Option<[f64; 6]> {
-        let c = self.epoch_absolute_covariance(i)?;
-        Some(core::array::from_fn(|k| libm::sqrt(c[k * 6 + k].max(0.0))))
+        Some(standard_deviations(&self.epoch_absolute_covariance(i)?))
     }
 
     /// 6x6 covariance (row-major) of slot `i` from the last solution (sigma0^2 scaled).

@@ -229,53 +229,6 @@ fn schur_step_zeroes_the_numerical_gradient() {
     assert!(after < 1e-3 * before, "gradient {before} -> {after}");
 }
 
-/// The rigid transport against moving both poses numerically: a small rotation
-/// about the first pose's centre (object frame) and a shift.
-#[test]
-fn rigid_transport_matches_a_rigid_motion_of_both_poses() {
-    use crate::camera::{angles_from_rotation, rotation};
-    let from = [1.62, 0.05, -0.1, 1.0, 2.0, 3.0];
-    let to = [1.5, -0.02, 0.3, 5.0, 20.0, 1.0];
-    let j = rigid_transport(&from, &to);
-    let e_from = angle_rates(&from);
-    let h = 1e-6;
-    for axis in 0..6 {
-        // The motion: a rotation vector (object frame) or a shift, size h.
-        let mut d = Vector3::zeros();
-        let mut shift = Vector3::zeros();
-        if axis < 3 {
-            d[axis] = h;
-        } else {
-            shift[axis - 3] = h;
-        }
-        let turn = nalgebra::Rotation3::new(d).into_inner();
-        let moved = |p: &[f64; 6]| {
-            let r = rotation(p[0], p[1], p[2]).transpose();
-            let c = Vector3::new(p[3], p[4], p[5]) - Vector3::new(from[3], from[4], from[5]);
-            let m = (turn * r).transpose();
-            let a = angles_from_rotation(&m);
-            let c = turn * c + Vector3::new(from[3], from[4], from[5]) + shift;
-            [a[0], a[1], a[2], c[0], c[1], c[2]]
-        };
-        let (f2, t2) = (moved(&from), moved(&to));
-        let df: [f64; 6] = core::array::from_fn(|k| f2[k] - from[k]);
-        let dt: [f64; 6] = core::array::from_fn(|k| t2[k] - to[k]);
-        // The angles' change of `from` is the rotation vector through E.
-        let da = e_from.try_inverse().unwrap() * d;
-        for k in 0..3 {
-            assert!((df[k] - da[k]).abs() < 1e-9, "axis {axis}: E");
-        }
-        for r in 0..6 {
-            let predicted: f64 = (0..6).map(|k| j[r * 6 + k] * df[k]).sum();
-            assert!(
-                (predicted - dt[r]).abs() < 1e-3 * h,
-                "axis {axis}, row {r}: {predicted} against {}",
-                dt[r]
-            );
-        }
-    }
-}
-
 /// The GNSS residual's angle derivatives (the lever arm turning with the camera)
 /// against numerical differentiation.
 #[test]

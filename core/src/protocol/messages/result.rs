@@ -214,10 +214,10 @@ impl Figures {
                 rms_px: r.f64()?,
                 chi2: r.f64()?,
                 redundancy: r.u32()?,
-                relative_sd_m: [r.f32()?, r.f32()?, r.f32()?],
+                relative_sd_m: r.f32s()?,
                 step_m: match r.u8()? {
                     0 => None,
-                    1 => Some([r.f32()?, r.f32()?, r.f32()?]),
+                    1 => Some(r.f32s()?),
                     _ => return Err(ParseError::Invalid("result step presence")),
                 },
             }),
@@ -241,12 +241,12 @@ impl Figures {
                 w.u8(figures_kind::ADJUSTMENT)?;
                 w.f64s(&[a.sigma0, a.rms_px, a.chi2])?;
                 w.u32(a.redundancy)?;
-                a.relative_sd_m.iter().try_for_each(|v| w.f32(*v))?;
+                w.f32s(&a.relative_sd_m)?;
                 match a.step_m {
                     None => w.u8(0),
                     Some(step) => {
                         w.u8(1)?;
-                        step.iter().try_for_each(|v| w.f32(*v))
+                        w.f32s(&step)
                     }
                 }
             }
@@ -272,8 +272,12 @@ pub struct EpochResult {
     pub status: ResultStatus,
     /// Left camera: omega, phi, kappa (rad), X, Y, Z (m).
     pub pose: [f64; 6],
-    /// Standard deviations of `pose`.
-    pub sigma: [f64; 6],
+    /// Standard deviations of `pose` (zero when not available). `f32`: seven
+    /// significant digits of a precision are more than it is known to.
+    pub sigma: [f32; 6],
+    /// Standard deviations of the right camera's pose, in the same order (zero when
+    /// not available).
+    pub right_sigma: [f32; 6],
     pub flags: ResultFlags,
     pub counts: Counts,
     /// The processor's own figures.
@@ -296,21 +300,15 @@ pub struct RigEstimate {
 
 impl RigEstimate {
     fn parse(r: &mut Reader) -> Result<Self, ParseError> {
-        let mut v = [0f32; 12];
-        for x in v.iter_mut() {
-            *x = r.f32()?;
-        }
         Ok(RigEstimate {
-            params: core::array::from_fn(|i| v[i]),
-            std: core::array::from_fn(|i| v[6 + i]),
+            params: r.f32s()?,
+            std: r.f32s()?,
         })
     }
 
     fn emit(&self, w: &mut Writer) -> Result<(), EncodeError> {
-        for x in self.params.iter().chain(self.std.iter()) {
-            w.f32(*x)?;
-        }
-        Ok(())
+        w.f32s(&self.params)?;
+        w.f32s(&self.std)
     }
 }
 
@@ -321,6 +319,7 @@ impl EpochResult {
             status,
             pose: [0.0; 6],
             sigma: [0.0; 6],
+            right_sigma: [0.0; 6],
             flags: ResultFlags::NONE,
             counts: Counts::default(),
             figures: Figures::None,
@@ -358,7 +357,8 @@ repr!(
             epoch: r.u32()?,
             status: ResultStatus::from_code(r.u8()?),
             pose: r.f64s()?,
-            sigma: r.f64s()?,
+            sigma: r.f32s()?,
+            right_sigma: r.f32s()?,
             flags: ResultFlags(r.u32()?),
             counts: Counts {
                 keypoints: r.u32s()?,
@@ -381,7 +381,8 @@ repr!(
         w.u32(s.epoch)?;
         w.u8(s.status.code())?;
         w.f64s(&s.pose)?;
-        w.f64s(&s.sigma)?;
+        w.f32s(&s.sigma)?;
+        w.f32s(&s.right_sigma)?;
         w.u32(s.flags.bits())?;
         let c = &s.counts;
         w.u32s(&c.keypoints)?;

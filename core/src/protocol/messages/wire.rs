@@ -58,6 +58,13 @@ impl<'a> Reader<'a> {
         }
         Ok(a)
     }
+    pub fn f32s<const N: usize>(&mut self) -> Result<[f32; N], ParseError> {
+        let mut a = [0.0; N];
+        for v in a.iter_mut() {
+            *v = self.f32()?;
+        }
+        Ok(a)
+    }
     pub fn u32s<const N: usize>(&mut self) -> Result<[u32; N], ParseError> {
         let mut a = [0; N];
         for v in a.iter_mut() {
@@ -115,6 +122,9 @@ impl<'a> Writer<'a> {
     }
     pub fn f64s(&mut self, v: &[f64]) -> Result<(), EncodeError> {
         v.iter().try_for_each(|x| self.f64(*x))
+    }
+    pub fn f32s(&mut self, v: &[f32]) -> Result<(), EncodeError> {
+        v.iter().try_for_each(|x| self.f32(*x))
     }
     pub fn u32s(&mut self, v: &[u32]) -> Result<(), EncodeError> {
         v.iter().try_for_each(|x| self.u32(*x))
