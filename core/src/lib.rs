@@ -9,6 +9,14 @@
 //! `protocol` carries frames in and results out. It is a leaf on [`camera`] and
 //! [`image`] types with its own codes for modes, statuses and flags: the firmware
 //! maps them to the traverse's, so the wire format stays put when the pipeline moves.
+//!
+//! The crate root re-exports what a program that orients a stereo sequence needs: a
+//! [`TraverseConfig`] (its defaults are the product's, [`traverse::defaults`]), the
+//! [`MemoryBudget`] it predicts, an [`Arena`] over that many bytes, a [`Traverse`] fed
+//! one [`ImageView`] pair per epoch, and an [`EpochOutput`] with each epoch's [`Pose`]s.
+//! The stages stay reachable by module for programs that use one alone:
+//! [`sift::Sift`], [`matching`]'s matchers, [`adjust::Window`], and
+//! [`protocol::Endpoint`] for a link. Each module keeps its internals to the crate.
 #![no_std]
 #![forbid(unsafe_op_in_unsafe_fn)]
 
@@ -23,3 +31,8 @@ pub mod sift;
 #[cfg(any(test, feature = "testkit"))]
 pub mod testkit;
 pub mod traverse;
+
+pub use budget::{Arena, MemoryBudget};
+pub use camera::{Camera, Interior, Pose, RelativeOrientation, Rig};
+pub use image::ImageView;
+pub use traverse::{EpochOutput, EpochStatus, Traverse, TraverseConfig};

@@ -181,7 +181,13 @@ fn run_writes_tie_points_efoto_and_the_residual_histogram() {
     let sd_rows: Vec<Vec<Option<f64>>> = eop_sd
         .lines()
         .skip(1)
-        .map(|l| l.split(',').skip(8).take(6).map(|v| v.parse().ok()).collect())
+        .map(|l| {
+            l.split(',')
+                .skip(8)
+                .take(6)
+                .map(|v| v.parse().ok())
+                .collect()
+        })
         .collect();
     let mut with_sd = 0;
     for pair in sd_rows.chunks(2) {
@@ -197,7 +203,10 @@ fn run_writes_tie_points_efoto_and_the_residual_histogram() {
             assert!(range.contains(&ratio), "sd {k}: {l:?} {r:?}");
         }
     }
-    assert!(with_sd >= FRAMES - 1, "{with_sd} epochs with standard deviations");
+    assert!(
+        with_sd >= FRAMES - 1,
+        "{with_sd} epochs with standard deviations"
+    );
 
     // The COLMAP model has every image once, named by its path in the dataset, and
     // every exported measurement once in the tracks of its points.

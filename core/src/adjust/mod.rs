@@ -10,16 +10,16 @@
 //!
 //! - [`geometry`]: collinearity of the left and right cameras of the rig with
 //!   analytic Jacobians (chain rule through the relative orientation).
-//! - [`intersection`]: linear intersection of two or more rays (seed 000, §5.4).
-//! - [`resection`]: P3P (Grunert) in a deterministic RANSAC, then least squares.
-//! - [`cholesky`]: in-place Cholesky factorisation, solve and inverse.
-//! - [`constraints`]: datum/prior, base length, relative orientation prior,
+//! - `intersection`: linear intersection of two or more rays (seed 000, §5.4).
+//! - `resection`: P3P (Grunert) in a deterministic RANSAC, then least squares.
+//! - `cholesky`: in-place Cholesky factorisation, solve and inverse.
+//! - `constraints`: datum/prior, base length, relative orientation prior,
 //!   motion smoothness, odometer distance, GNSS position.
 //! - [`weighting`]: seed 000 weighting schemes and the robust re-weighting.
-//! - [`propagation`]: a pose covariance carried through a rigid connection (the
+//! - `propagation`: a pose covariance carried through a rigid connection (the
 //!   newest fixed epoch to the window's, the left camera to the right).
 //! - [`quality`]: sigma0, chi-square quantiles and the global test.
-//! - [`window`]: the sliding-window adjuster (storage from the arena, normal
+//! - `window`: the sliding-window adjuster (storage from the arena, normal
 //!   equations with the Schur complement, Levenberg-Marquardt).
 
 // `!(x > 0.0)` is deliberate throughout: it is also true for NaN, so invalid
@@ -32,15 +32,15 @@
     clippy::type_complexity
 )]
 
-pub mod cholesky;
-pub mod constraints;
+pub(crate) mod cholesky;
+pub(crate) mod constraints;
 pub mod geometry;
-pub mod intersection;
-pub mod propagation;
+pub(crate) mod intersection;
+pub(crate) mod propagation;
 pub mod quality;
-pub mod resection;
+pub(crate) mod resection;
 pub mod weighting;
-pub mod window;
+pub(crate) mod window;
 
 #[cfg(test)]
 mod bias_tests;

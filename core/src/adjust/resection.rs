@@ -30,7 +30,7 @@ pub struct ResectionConfig {
     /// Probability that at least one sample drawn is free of outliers: the search
     /// stops once the best hypothesis's inlier ratio makes `samples` more than that
     /// needs (the standard adaptive stopping rule, never fewer than
-    /// [`MIN_RANSAC_SAMPLES`]). 1.0 draws all `samples`.
+    /// `MIN_RANSAC_SAMPLES`). 1.0 draws all `samples`.
     pub confidence: f64,
     /// Inlier threshold on the reprojection error, mm.
     pub threshold_mm: f64,

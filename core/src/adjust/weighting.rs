@@ -14,7 +14,7 @@
 //! The robust default ([`super::Robust::Snooping`]) first iterates with Cauchy
 //! weights on a robust (median) scale, then tests every observation with
 //! `T = v^T Q_vv^-1 v` (2 degrees of freedom) and excludes the outliers, repeating
-//! until the set is stable: see [`super::window`].
+//! until the set is stable: see `super::window`.
 
 /// Smallest y-parallax the parallax scheme divides by, mm.
 pub const MIN_Y_PARALLAX_MM: f64 = 1e-3;

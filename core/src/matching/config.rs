@@ -39,9 +39,9 @@ pub enum StereoGeometry {
 /// Area-based sub-pixel refinement of stereo matches (normalised cross-correlation).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RefineConfig {
-    /// Template half-size in pixels (4 gives a 9 x 9 template), at most [`MAX_REFINE_HALF`].
+    /// Template half-size in pixels (4 gives a 9 x 9 template), at most `MAX_REFINE_HALF`.
     pub half_window: u8,
-    /// Search radius in whole pixels around the matched position, at most [`MAX_REFINE_RADIUS`].
+    /// Search radius in whole pixels around the matched position, at most `MAX_REFINE_RADIUS`.
     pub search_radius: u8,
     /// Smallest NCC peak accepted; below it the match is rejected as unreliable.
     pub min_ncc: f32,

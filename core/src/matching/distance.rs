@@ -22,8 +22,9 @@ pub fn distance_bounded(a: &Descriptor, b: &Descriptor, limit: u32) -> u32 {
     sum
 }
 
-/// Full squared L2 distance (max 128 * 255^2, fits in u32).
-#[inline]
+/// Full squared L2 distance (max 128 * 255^2, fits in u32): the reference of the
+/// bounded kernel's tests.
+#[cfg(test)]
 pub fn distance(a: &Descriptor, b: &Descriptor) -> u32 {
     distance_bounded(a, b, u32::MAX)
 }

@@ -78,12 +78,9 @@ impl<'a> Grid<'a> {
     }
 
     /// Number of indexed keypoints.
+    #[cfg(test)]
     pub fn len(&self) -> usize {
         self.len
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.len == 0
     }
 
     /// Calls `f` with every indexed keypoint whose bucket overlaps the rectangle

@@ -451,7 +451,7 @@ impl<'a> Matcher<'a> {
     /// Matches one epoch. `prev` must be the features passed as `cur` in the last
     /// accepted call (or `None` to start over: first epoch, or after a break).
     /// `motion` (the rig and the current left camera's pose in the previous left
-    /// camera's frame, see [`super::predict`]) guides the temporal search.
+    /// camera's frame, see `super::predict`) guides the temporal search.
     pub fn process_epoch(
         &mut self,
         cur: StereoFeatures<'_>,
@@ -755,7 +755,7 @@ impl<'a> Matcher<'a> {
         self.tracks.set_positions(slot, self.epoch, left, right)
     }
 
-    /// A fresh tie point identity (see [`Tracks::allocate_id`]).
+    /// A fresh tie point identity (see `Tracks::allocate_id`).
     pub fn new_track_id(&mut self) -> u32 {
         self.tracks.allocate_id()
     }

@@ -1,26 +1,26 @@
 //! Stereo and temporal matching, quad tie points and tracks.
 //!
-//! One file per concern: [`config`] (configuration, budget), [`distance`] (u8 descriptor
-//! distance with early exit), [`grid`] (spatial index), [`search`] (the shared
-//! mutual/ratio matcher), [`stereo`] (epipolar bands), [`temporal`] (guided windows),
-//! [`predict`] (motion predictions), [`quad`] (loop closure), [`spread`] (Von Gruber
-//! regions), [`tracks`], [`refine`] (NCC sub-pixel), and [`matcher`] which runs an epoch.
+//! One file per concern: `config` (configuration, budget), `distance` (u8 descriptor
+//! distance with early exit), `grid` (spatial index), `search` (the shared
+//! mutual/ratio matcher), `stereo` (epipolar bands), `temporal` (guided windows),
+//! `predict` (motion predictions), `quad` (loop closure), `spread` (Von Gruber
+//! regions), `tracks`, `refine` (NCC sub-pixel), and `matcher` which runs an epoch.
 
-pub mod config;
-pub mod distance;
-pub mod grid;
-pub mod matcher;
-pub mod motion;
-pub mod predict;
-pub mod quad;
-pub mod refine;
-pub mod search;
-pub mod spread;
-pub mod stereo;
+pub(crate) mod config;
+pub(crate) mod distance;
+pub(crate) mod grid;
+pub(crate) mod matcher;
+pub(crate) mod motion;
+pub(crate) mod predict;
+pub(crate) mod quad;
+pub(crate) mod refine;
+pub(crate) mod search;
+pub(crate) mod spread;
+pub(crate) mod stereo;
 #[cfg(any(test, feature = "testkit"))]
 pub mod synthetic;
-pub mod temporal;
-pub mod tracks;
+pub(crate) mod temporal;
+pub(crate) mod tracks;
 
 #[cfg(test)]
 mod tests;

@@ -84,62 +84,6 @@ fn bilinear(img: &ImageView<'_>, x: f32, y: f32) -> f32 {
     top * (1.0 - fy) + bot * fy
 }
 
-/// Sub-pixel refinement of a correlation peak at `centre` (whole pixels from an
-/// unscaled search) for a template whose surface appears `scale` times larger in
-/// `img` (a point approached by the camera): the 3 x 3 positions around `centre` are
-/// correlated with the image sampled every `scale` pixels, and parabolas through them
-/// give the position. Errors as [`correlate`]; `PeakOnEdge` when the scaled peak is not
-/// the centre.
-pub fn refine_scaled(
-    tpl: &[f32; TEMPLATE_LEN],
-    h: usize,
-    img: &ImageView<'_>,
-    centre: [f32; 2],
-    scale: f32,
-    min_ncc: f32,
-) -> Result<([f32; 2], f32), RefineError> {
-    let h = h.min(MAX_REFINE_HALF);
-    let (n, hf) = (2 * h + 1, h as f32);
-    if !(scale.is_finite() && (0.5..=2.0).contains(&scale)) {
-        return Err(RefineError::Flat);
-    }
-    let reach = scale * hf + 2.0;
-    if !centre.iter().all(|v| v.is_finite()) || !inside(img, centre[0], centre[1], reach) {
-        return Err(RefineError::Border);
-    }
-    let Some((zt, tnorm)) = zero_mean(tpl, n) else {
-        return Err(RefineError::Flat);
-    };
-    let cnt = (n * n) as f32;
-    let mut score = [0f32; 9];
-    for (k, sc) in score.iter_mut().enumerate() {
-        let cx = centre[0] + (k % 3) as f32 - 1.0;
-        let cy = centre[1] + (k / 3) as f32 - 1.0;
-        let (mut sum, mut sum2, mut cross) = (0f32, 0f32, 0f32);
-        for v in 0..n {
-            for u in 0..n {
-                let x = cx + scale * (u as f32 - hf);
-                let y = cy + scale * (v as f32 - hf);
-                let s = bilinear(img, x, y);
-                sum += s;
-                sum2 += s * s;
-                cross += s * zt[v * n + u];
-            }
-        }
-        *sc = ncc(sum, sum2, cross, cnt, tnorm);
-    }
-    let peak = score[4];
-    if peak < min_ncc {
-        return Err(RefineError::LowScore);
-    }
-    if score.iter().any(|&v| v > peak) {
-        return Err(RefineError::PeakOnEdge);
-    }
-    let dx = parabola(score[3], peak, score[5]);
-    let dy = parabola(score[1], peak, score[7]);
-    Ok(([centre[0] + dx, centre[1] + dy], peak))
-}
-
 /// NCC of a window (its sum, sum of squares and cross product with the zero-mean
 /// template of squared norm `tnorm`, over `cnt` samples); -1 for a flat window.
 #[inline]

@@ -3,10 +3,10 @@
 //! On the wire every packet is `COBS(header | payload | CRC-32) 0x00`:
 //! - [`cobs`]: byte stuffing so 0x00 delimits packets;
 //! - [`crc`]: CRC-32 of packets and whole frames;
-//! - [`packet`]: the header view (`Packet::new_checked`, accessors) and the encoder;
+//! - `packet`: the header view (`Packet::new_checked`, accessors) and the encoder;
 //! - [`messages`]: one repr per message with `parse`/`emit`;
-//! - [`decoder`]: the streaming decoder in fixed memory that resynchronises at delimiters;
-//! - [`window`]: the selective-repeat sender window and the receiver's reorder ring;
+//! - `decoder`: the streaming decoder in fixed memory that resynchronises at delimiters;
+//! - `window`: the selective-repeat sender window and the receiver's reorder ring;
 //! - [`endpoint`]: the sans-IO reliable endpoint both sides drive (bytes in, bytes and messages out);
 //! - [`assembly`]: frames assembled from chunks into preallocated buffers.
 //!
@@ -14,13 +14,13 @@
 pub mod assembly;
 pub mod cobs;
 pub mod crc;
-pub mod decoder;
+pub(crate) mod decoder;
 pub mod endpoint;
 pub mod messages;
-pub mod packet;
+pub(crate) mod packet;
 #[cfg(any(test, feature = "samples"))]
 pub mod samples;
-pub mod window;
+pub(crate) mod window;
 
 #[cfg(test)]
 mod tests;

@@ -115,6 +115,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
         self.count
     }
 
+    #[cfg(test)]
     pub fn is_empty(&self) -> bool {
         self.count == 0
     }
@@ -124,6 +125,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
     }
 
     /// Sequence number of the oldest packet held.
+    #[cfg(test)]
     pub fn base(&self) -> u16 {
         self.base
     }
@@ -175,6 +177,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
     }
 
     /// Holds the encoded packet `bytes`; returns its sequence number.
+    #[cfg(test)]
     pub fn push(&mut self, bytes: &[u8]) -> Result<u16, WindowError> {
         if bytes.len() > self.slot_len {
             return Err(WindowError::TooLarge);

@@ -10,6 +10,7 @@
 use core::f32::consts::PI;
 
 use super::config::{DESC_BINS, DESC_GRID, DESC_ORI_BINS};
+#[cfg(any(test, not(target_arch = "x86_64")))]
 use super::fastmath::{atan2_pos, floor_i, round_i};
 use super::levels::{central, farid, fits, scharr, Gradient};
 
@@ -82,6 +83,7 @@ impl RowSamples {
     }
 
     /// The scalar definition of [`RowSamples::place`].
+    #[cfg(any(test, not(target_arch = "x86_64")))]
     pub fn place_scalar(
         &mut self,
         f: &Frame,
@@ -170,6 +172,7 @@ impl RowSamples {
     }
 
     /// The scalar definition of [`RowSamples::magnitudes_and_bins`].
+    #[cfg(any(test, not(target_arch = "x86_64")))]
     pub fn magnitudes_and_bins_scalar(&mut self, theta: f32, obin_scale: f32, n: usize) {
         for j in 0..lanes(n) {
             let (dx, dy) = (self.dx[j], self.dy[j]);

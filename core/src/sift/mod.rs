@@ -32,16 +32,16 @@
 //! assert!(arena.used() <= budget.total());
 //! ```
 
-pub mod config;
-pub mod desc_samples;
-pub mod descriptor;
-pub mod extrema;
-pub mod fastmath;
-pub mod levels;
-pub mod orientation;
-pub mod pending;
-pub mod scale_space;
-pub mod select;
+pub(crate) mod config;
+pub(crate) mod desc_samples;
+pub(crate) mod descriptor;
+pub(crate) mod extrema;
+pub(crate) mod fastmath;
+pub(crate) mod levels;
+pub(crate) mod orientation;
+pub(crate) mod pending;
+pub(crate) mod scale_space;
+pub(crate) mod select;
 
 pub use config::{Geometry, Gradient, SiftConfig, SiftError};
 

@@ -42,10 +42,7 @@ impl<'a> PendingQueue<'a> {
         self.len = 0;
     }
 
-    pub fn len(&self) -> usize {
-        self.len
-    }
-
+    #[cfg(test)]
     pub fn is_empty(&self) -> bool {
         self.len == 0
     }

@@ -245,14 +245,14 @@ impl TraverseConfig {
     /// `matching.max_keypoints` or `adjust.window`.
     ///
     /// - tie points per epoch (found by descriptors and by area together): at most
-    ///   [`MAX_TIE_POINTS`], the tracks and the keypoints;
+    ///   `MAX_TIE_POINTS`, the tracks and the keypoints;
     /// - window points: each epoch creates at most one point per tie point, and a point
     ///   lives while one of its observations is in the window: `tie points x window`;
     /// - window observations: an epoch holds two per tie point (left and right) plus two
     ///   per point intersected from it at the next epoch: `4 x tie points x window`.
     ///   With these bounds the window never drops an observation;
     /// - SIFT candidates waiting for their descriptor rows: a band of rows as wide as the
-    ///   image, so proportional to the width ([`PENDING_PER_COLUMN`]).
+    ///   image, so proportional to the width (`PENDING_PER_COLUMN`).
     pub fn fit_capacities(&mut self) {
         let m = &mut self.matching;
         m.max_tie_points = MAX_TIE_POINTS.min(m.max_tracks).min(m.max_keypoints).max(1);

@@ -32,7 +32,7 @@ pub const TRAVERSE_MATCH_RATIO: f32 = 0.8;
 pub const TRAVERSE_DISPARITY_FRACTION: f32 = 0.5;
 
 /// Live tracks at most: more than the tie points of an epoch (at most
-/// [`MAX_TIE_POINTS`](super::config::MAX_TIE_POINTS)) plus those a window keeps alive.
+/// `MAX_TIE_POINTS`) plus those a window keeps alive.
 pub const TRAVERSE_TRACKS: usize = 600;
 
 /// Epochs in the traverse's adjustment window: with the tie points carried on by area

@@ -17,15 +17,15 @@
 //! ([`TraverseConfig::budget`] predicts it); processing allocates nothing.
 
 mod area;
-pub mod config;
+pub(crate) mod config;
 pub mod defaults;
 mod initial;
 pub mod motion;
-pub mod output;
-pub mod patches;
+pub(crate) mod output;
+pub(crate) mod patches;
 mod refine;
 mod solve;
-pub mod turn;
+pub(crate) mod turn;
 mod window_view;
 
 #[cfg(test)]

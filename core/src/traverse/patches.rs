@@ -178,11 +178,13 @@ impl<'a> Patches<'a> {
         self.keys.len()
     }
 
+    #[cfg(test)]
     pub fn is_empty(&self) -> bool {
         self.n == 0
     }
 
     /// Templates that did not fit since the last [`Patches::begin`].
+    #[cfg(test)]
     pub fn dropped(&self) -> u32 {
         self.dropped
     }
@@ -227,6 +229,7 @@ impl<'a> Patches<'a> {
     }
 
     /// The template stored at exactly `key`, expanded into `out`.
+    #[cfg(test)]
     pub fn find(&self, key: [f32; 2], out: &mut [f32; TEMPLATE_LEN]) -> bool {
         self.index_of(key).is_some_and(|i| self.template(i, out))
     }
