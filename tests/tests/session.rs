@@ -277,7 +277,7 @@ fn every_packet_fault_kind_is_survived() {
 }
 
 /// Builds the firmware binary (a no-op under `cargo test --workspace`, which
-/// built it with the same profile; needed under `cargo test -p phototraverse-host`).
+/// built it with the same profile; needed under `cargo test -p phototraverse-tests`).
 fn ensure_firmware_binary() {
     static BUILT: std::sync::Once = std::sync::Once::new();
     BUILT.call_once(build_firmware_binary);
