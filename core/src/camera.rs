@@ -837,5 +837,8 @@ pub fn pose_from_kitti(origin: &Pose, kitti: &[[f64; 4]; 3]) -> Pose {
     Pose::from_rotation(&mk, [ck[0], ck[1], ck[2]])
 }
 
+mod rigid;
+pub use rigid::{rigid_fit, RigidMotion};
+
 #[cfg(test)]
 mod tests;

@@ -1,4 +1,4 @@
-//! Motion consistency of the closed quads (LIBVISO2-style, here 3-D to 3-D): a quad
+//! RigidMotion consistency of the closed quads (LIBVISO2-style, here 3-D to 3-D): a quad
 //! closes its loop but can still be wrong consistently (a repeated window matched to
 //! its neighbour in both images). Each quad is triangulated at k-1 (P) and at k (Q) in
 //! its left camera frame; one rigid motion `Q = R P + t` must explain them all. The
@@ -8,7 +8,7 @@
 //! images within `threshold_px` of its observations. Image-space residuals keep far
 //! points, whose depth is poor but whose reprojection is still exact, in the test.
 
-use crate::camera::{proper_rotation, Rig};
+use crate::camera::{rigid_fit, Rig, RigidMotion};
 use nalgebra::{Matrix3, Vector3};
 
 /// Parameters of the check.
@@ -35,42 +35,22 @@ impl Default for MotionCheckConfig {
 /// One quad's observations: previous left/right, current left/right (pixels).
 pub type QuadObs = [[f32; 2]; 4];
 
-/// Rigid motion estimated by the check.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Motion {
-    pub r: Matrix3<f64>,
-    pub t: Vector3<f64>,
-}
-
-/// Weighted Kabsch: the rotation and translation taking `p` onto `q`.
-fn kabsch(p: &[Vector3<f64>], q: &[Vector3<f64>], w: &[f64]) -> Option<Motion> {
-    let sw: f64 = w.iter().sum();
-    if sw.is_nan() || sw <= 0.0 {
-        return None;
-    }
-    let mut cp = Vector3::zeros();
-    let mut cq = Vector3::zeros();
-    for ((a, b), &wi) in p.iter().zip(q).zip(w) {
-        cp += a * wi;
-        cq += b * wi;
-    }
-    cp /= sw;
-    cq /= sw;
-    let mut h = Matrix3::zeros();
-    for ((a, b), &wi) in p.iter().zip(q).zip(w) {
-        h += (a - cp) * (b - cq).transpose() * wi;
-    }
-    let svd = h.svd(true, true);
-    let (u, vt) = (svd.u?, svd.v_t?);
-    let r = proper_rotation(&vt.transpose(), &u.transpose())?;
-    let t = cq - r * cp;
-    (r.iter().chain(t.iter()).all(|x| x.is_finite())).then_some(Motion { r, t })
+/// Weight of a point in the fit: `1/Z^2`, so far points with uncertain depth do not
+/// steer it.
+fn depth_weight(p: &Vector3<f64>) -> f64 {
+    1.0 / (p[2] * p[2]).max(1e-6)
 }
 
 /// Reprojection residual (mm in corrected photo-coordinates, the larger of left and
 /// right) of `p` moved by `m`; `obs` holds corrected coordinates. Working in corrected
 /// coordinates avoids the iterative inverse distortion in the RANSAC loop.
-fn residual(rig: &Rig, mrel: &Matrix3<f64>, m: &Motion, p: &Vector3<f64>, obs: &QuadObs) -> f64 {
+fn residual(
+    rig: &Rig,
+    mrel: &Matrix3<f64>,
+    m: &RigidMotion,
+    p: &Vector3<f64>,
+    obs: &QuadObs,
+) -> f64 {
     let q = m.r * p + m.t;
     let proj = |f: f64, x: Vector3<f64>| -> Option<[f64; 2]> {
         if x[2].is_nan() || x[2] >= -1e-9 {
@@ -120,7 +100,7 @@ pub fn check_motion(
     pts: &mut [[f64; 3]],
     inlier: &mut [u8],
     seed: u32,
-) -> Option<Motion> {
+) -> Option<RigidMotion> {
     let n = obs.len().min(pts.len() / 2).min(inlier.len());
     inlier[..n].fill(1);
     let mrel = rig.relative_rotation();
@@ -146,11 +126,10 @@ pub fn check_motion(
         return None;
     }
     let v = |i: usize, k: usize| Vector3::from(pts[2 * i + k]);
-    let weight = |p: &Vector3<f64>| 1.0 / (p[2] * p[2]).max(1e-6);
     // The threshold in mm on the image plane.
     let px = 0.5 * (rig.left.pixel_size_mm[0] + rig.left.pixel_size_mm[1]);
     let thr = cfg.threshold_px as f64 * px;
-    let count = |m: &Motion| {
+    let count = |m: &RigidMotion| {
         (0..n)
             .filter(|&i| {
                 pts[2 * i][0].is_finite() && residual(rig, &mrel, m, &v(i, 0), &obs[i]) <= thr
@@ -164,7 +143,7 @@ pub fn check_motion(
             .wrapping_add(1442695040888963407);
         (rng >> 33) as usize % n
     };
-    let mut best: Option<(usize, Motion)> = None;
+    let mut best: Option<(usize, RigidMotion)> = None;
     // Adaptive RANSAC: stop once a sample of three inliers has been drawn with 99.9 %
     // probability given the best inlier share so far (at most `iterations` samples).
     let mut needed = cfg.iterations as f64;
@@ -175,10 +154,8 @@ pub fn check_motion(
         if a == b || b == c || a == c || [a, b, c].iter().any(|&i| !pts[2 * i][0].is_finite()) {
             continue;
         }
-        let p = [v(a, 0), v(b, 0), v(c, 0)];
-        let q = [v(a, 1), v(b, 1), v(c, 1)];
-        let w = [weight(&p[0]), weight(&p[1]), weight(&p[2])];
-        let Some(m) = kabsch(&p, &q, &w) else {
+        let sample = [a, b, c].map(|i| (v(i, 0), v(i, 1), depth_weight(&v(i, 0))));
+        let Some(m) = rigid_fit(sample.into_iter()) else {
             continue;
         };
         let k = count(&m);
@@ -221,46 +198,20 @@ pub fn check_motion(
     Some(m)
 }
 
-/// Weighted Kabsch over every inlier of `m`, accumulated in one pass.
+/// Weighted Kabsch over every inlier of `m`.
 fn refit_inliers(
     rig: &Rig,
     mrel: &Matrix3<f64>,
-    m: &Motion,
+    m: &RigidMotion,
     obs: &[QuadObs],
     pts: &[[f64; 3]],
     n: usize,
     thr: f64,
-) -> Option<Motion> {
-    let (mut sw, mut cp, mut cq) = (0.0, Vector3::zeros(), Vector3::zeros());
-    let inl = |i: usize| {
-        let p = Vector3::from(pts[2 * i]);
-        p[0].is_finite() && residual(rig, mrel, m, &p, &obs[i]) <= thr
-    };
-    let mut k = 0;
-    for i in (0..n).filter(|&i| inl(i)) {
+) -> Option<RigidMotion> {
+    let inliers = (0..n).filter_map(move |i| {
         let (p, q) = (Vector3::from(pts[2 * i]), Vector3::from(pts[2 * i + 1]));
-        let w = 1.0 / (p[2] * p[2]).max(1e-6);
-        sw += w;
-        cp += p * w;
-        cq += q * w;
-        k += 1;
-    }
-    if k < 3 {
-        return None;
-    }
-    cp /= sw;
-    cq /= sw;
-    let mut h = Matrix3::zeros();
-    for i in (0..n).filter(|&i| inl(i)) {
-        let (p, q) = (Vector3::from(pts[2 * i]), Vector3::from(pts[2 * i + 1]));
-        let w = 1.0 / (p[2] * p[2]).max(1e-6);
-        h += (p - cp) * (q - cq).transpose() * w;
-    }
-    let svd = h.svd(true, true);
-    let (u, vt) = (svd.u?, svd.v_t?);
-    let v = vt.transpose();
-    let d = (v * u.transpose()).determinant().signum();
-    let r = v * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * u.transpose();
-    let t = cq - r * cp;
-    (r.iter().chain(t.iter()).all(|x| x.is_finite())).then_some(Motion { r, t })
+        (p[0].is_finite() && residual(rig, mrel, m, &p, &obs[i]) <= thr)
+            .then(|| (p, q, depth_weight(&p)))
+    });
+    rigid_fit(inliers)
 }
