@@ -34,20 +34,81 @@ impl core::fmt::Display for OutOfMemory {
     }
 }
 
+/// The stages whose carves an [`Arena`] counts apart: the measured side of a
+/// [`MemoryBudget`], whose components are named `"<prefix>.<buffer>"`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stage {
+    /// The firmware's own buffers (the frames).
+    Firmware,
+    Sift,
+    /// The keypoints and descriptors of the images.
+    Features,
+    Match,
+    Adjust,
+    Traverse,
+}
+
+impl Stage {
+    pub const ALL: [Stage; 6] = [
+        Stage::Firmware,
+        Stage::Sift,
+        Stage::Features,
+        Stage::Match,
+        Stage::Adjust,
+        Stage::Traverse,
+    ];
+
+    /// The prefix of the stage's budget components (without the dot).
+    pub const fn prefix(self) -> &'static str {
+        match self {
+            Stage::Firmware => "firmware",
+            Stage::Sift => "sift",
+            Stage::Features => "features",
+            Stage::Match => "match",
+            Stage::Adjust => "adjust",
+            Stage::Traverse => "traverse",
+        }
+    }
+
+    const fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// Bytes carved per [`Stage`], in the order of [`Stage::ALL`].
+pub type CarvedBytes = [usize; Stage::ALL.len()];
+
 /// A bump allocator over one caller-provided byte slice. Never frees singly;
-/// [`Arena::used`] is the measured high-water mark of everything carved.
+/// [`Arena::used`] is the measured high-water mark of everything carved, and
+/// [`Arena::carved`] the same bytes by the [`Stage`] that carved them.
 pub struct Arena<'a> {
     free: &'a mut [u8],
     capacity: usize,
+    stage: Stage,
+    carved: CarvedBytes,
 }
 
 impl<'a> Arena<'a> {
+    /// An arena whose carves count under [`Stage::Firmware`] until [`Arena::stage`] says otherwise.
     pub fn new(storage: &'a mut [u8]) -> Self {
         let capacity = storage.len();
         Arena {
             free: storage,
             capacity,
+            stage: Stage::Firmware,
+            carved: [0; Stage::ALL.len()],
         }
+    }
+
+    /// Counts the carves that follow under `stage`. The builder of a pipeline sets it
+    /// before each stage's constructor, so a stage need not know how it is counted.
+    pub fn stage(&mut self, stage: Stage) {
+        self.stage = stage;
+    }
+
+    /// Bytes carved so far per stage (padding included).
+    pub fn carved(&self) -> CarvedBytes {
+        self.carved
     }
 
     /// A zeroed slice of `n` values of `T`, aligned for `T`.
@@ -67,6 +128,7 @@ impl<'a> Arena<'a> {
         let free = core::mem::take(&mut self.free);
         let (head, tail) = free.split_at_mut(requested);
         self.free = tail;
+        self.carved[self.stage.index()] += requested;
         let body = &mut head[pad..];
         body.fill(0);
         // Alignment and length were established above, so the cast cannot fail.
@@ -186,6 +248,26 @@ mod tests {
         b[3] = 7;
         assert!(arena.used() <= slice_bytes::<u8>(3) + slice_bytes::<u32>(4));
         assert!(arena.used() >= 3 + 16);
+    }
+
+    #[test]
+    fn arena_counts_each_stage_apart() {
+        let mut storage = [0u8; 256];
+        let mut arena = Arena::new(&mut storage);
+        arena.alloc_slice::<u8>(5).unwrap();
+        arena.stage(Stage::Adjust);
+        arena.alloc_slice::<u64>(3).unwrap();
+        arena.stage(Stage::Sift);
+        arena.alloc_slice::<u8>(7).unwrap();
+        let c = arena.carved();
+        assert_eq!(c[Stage::Firmware as usize], 5);
+        // The u64 slice starts at the next multiple of its alignment: padding counts.
+        assert!((24..=24 + 7).contains(&c[Stage::Adjust as usize]), "{c:?}");
+        assert_eq!(c[Stage::Sift as usize], 7);
+        assert_eq!(c.iter().sum::<usize>(), arena.used());
+        // A failed request counts nowhere.
+        assert!(arena.alloc_slice::<u8>(1000).is_err());
+        assert_eq!(arena.carved(), c);
     }
 
     #[test]

@@ -6,8 +6,8 @@
 //!
 //! Data flows one way through the modules, one per pipeline stage:
 //! [`image`] -> `sift` -> `matching` -> [`camera`] -> `adjust` -> `traverse`;
-//! `protocol` carries frames in and results out. It is a leaf on [`camera`] and
-//! [`image`] types with its own codes for modes, statuses and flags: the firmware
+//! `protocol` carries frames in and results out. It is a leaf on [`camera`],
+//! [`image`] and [`budget`] types with its own codes for modes, statuses and flags: the firmware
 //! maps them to the traverse's, so the wire format stays put when the pipeline moves.
 //!
 //! The crate root re-exports what a program that orients a stereo sequence needs: a

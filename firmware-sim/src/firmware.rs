@@ -7,7 +7,7 @@ use crate::link::{
 };
 use crate::processor::{BuildError, Clock, EpochInput, EpochProcessor, ProcessorFactory};
 use embedded_io::{Read, Write};
-use phototraverse_core::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget};
+use phototraverse_core::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget, Stage};
 use phototraverse_core::protocol::assembly::{AssemblyError, FrameAssembler};
 use phototraverse_core::protocol::messages::{
     points_flags, stage, Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult,
@@ -283,10 +283,15 @@ impl<'w, F: ProcessorFactory, C: Clock> Firmware<'w, F, C> {
             }
         };
         let used = arena.used() + frame_arena.as_ref().map_or(0, Arena::used);
+        let frames_carved = frame_arena
+            .as_ref()
+            .map_or([0; Stage::ALL.len()], Arena::carved);
+        let carved = arena.carved();
         let accepted = ConfigAccepted {
             predicted_bytes: budget.total() as u32,
             frame_bytes: 2 * frame as u32,
             capacity_bytes: capacity as u32,
+            carved_bytes: core::array::from_fn(|k| (carved[k] + frames_carved[k]) as u32),
         };
         link.tx(&*clock)
             .send(port, &Message::ConfigAccepted(accepted))?;

@@ -1,7 +1,7 @@
 //! Per-epoch processing behind a small trait, so the traverse plugs in without
 //! touching the protocol loop. The firmware builds one processor per
 //! configuration from its arena and calls it on every complete stereo epoch.
-use phototraverse_core::budget::{Arena, ComponentKind, MemoryBudget, OutOfMemory};
+use phototraverse_core::budget::{Arena, ComponentKind, MemoryBudget, OutOfMemory, Stage};
 use phototraverse_core::features::FeatureSet;
 use phototraverse_core::image::ImageView;
 use phototraverse_core::protocol::messages::{
@@ -131,18 +131,18 @@ impl ProcessorFactory for SiftFactory {
 
     fn budget(&self, config: &Configure, budget: &mut MemoryBudget) -> Result<(), BuildError> {
         let cfg = sift_config(config);
-        cfg.budget(budget).map_err(sift_error)?;
+        cfg.working_budget(budget).map_err(sift_error)?;
         FeatureSet::budget(
             cfg.max_keypoints,
             budget,
-            "sift.keypoints_left",
-            "sift.descriptors_left",
+            "features.keypoints_left",
+            "features.descriptors_left",
         );
         FeatureSet::budget(
             cfg.max_keypoints,
             budget,
-            "sift.keypoints_right",
-            "sift.descriptors_right",
+            "features.keypoints_right",
+            "features.descriptors_right",
         );
         Ok(())
     }
@@ -153,7 +153,9 @@ impl ProcessorFactory for SiftFactory {
         arena: &mut Arena<'a>,
     ) -> Result<SiftProcessor<'a>, BuildError> {
         let cfg = sift_config(config);
+        arena.stage(Stage::Sift);
         let sift = Sift::new(cfg, arena).map_err(sift_error)?;
+        arena.stage(Stage::Features);
         let left = FeatureSet::new(arena, cfg.max_keypoints)?;
         let right = FeatureSet::new(arena, cfg.max_keypoints)?;
         Ok(SiftProcessor {
@@ -207,7 +209,7 @@ impl ProcessorFactory for ImageStatsFactory {
 
     fn budget(&self, _config: &Configure, budget: &mut MemoryBudget) -> Result<(), BuildError> {
         budget.add(
-            "stats.histogram",
+            "firmware.histogram",
             ComponentKind::Working,
             phototraverse_core::budget::slice_bytes::<u32>(256),
         );

@@ -24,7 +24,7 @@ use crate::session::{EpochFrames, Session, SessionOptions};
 use crate::smoothing;
 use anyhow::{Context, Result};
 use phototraverse_core::adjust::quality::ChiSquareTest;
-use phototraverse_core::budget::{ComponentKind, MemoryBudget};
+use phototraverse_core::budget::{Component, ComponentKind, MemoryBudget, Stage};
 use phototraverse_core::camera::{kitti_from_pose, pose_from_kitti, Pose, Rig};
 use phototraverse_core::protocol::messages::{
     self, stage, Aux, ConfigAccepted, EpochResult, ResultFlags, AUX_GNSS, AUX_ODOMETER,
@@ -459,16 +459,39 @@ impl<'d> Run<'d> {
                 .configure_for(&self.ds.rig, &self.ds.datum, &self.ds.precision);
         let _ = configuration_budget(&TraverseFactory, &configure, &mut budget);
         let kind = |k: ComponentKind| format!("{k:?}").to_lowercase();
-        let mut lines: Vec<MemoryLine> = budget
-            .components()
-            .iter()
-            .map(|c| MemoryLine {
-                name: c.name.to_string(),
-                kind: kind(c.kind),
-                predicted_bytes: c.bytes,
-                measured_bytes: None,
-            })
-            .collect();
+        let line = |c: &Component| MemoryLine {
+            name: c.name.to_string(),
+            kind: kind(c.kind),
+            predicted_bytes: c.bytes,
+            measured_bytes: None,
+        };
+        // Each stage's components, then the stage's total beside what its buffers
+        // carved when the firmware built them.
+        let mut lines = Vec::new();
+        for (stage, carved) in Stage::ALL.iter().zip(self.accepted.carved_bytes) {
+            let prefix = format!("{}.", stage.prefix());
+            let own: Vec<&Component> = budget
+                .components()
+                .iter()
+                .filter(|c| c.name.starts_with(&prefix))
+                .collect();
+            if own.is_empty() && carved == 0 {
+                continue;
+            }
+            lines.extend(own.into_iter().map(line));
+            lines.push(MemoryLine {
+                name: format!("{} (stage)", stage.prefix()),
+                kind: "stage".into(),
+                predicted_bytes: budget.total_with_prefix(&prefix),
+                measured_bytes: Some(carved as usize),
+            });
+        }
+        let staged = |c: &&Component| {
+            Stage::ALL
+                .iter()
+                .any(|s| c.name.starts_with(&format!("{}.", s.prefix())))
+        };
+        lines.extend(budget.components().iter().filter(|c| !staged(c)).map(line));
         lines.push(MemoryLine {
             name: "total (firmware arena)".into(),
             kind: "all".into(),

@@ -253,6 +253,40 @@ fn run_writes_tie_points_efoto_and_the_residual_histogram() {
     );
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("Final image residuals"));
+    // Each stage's memory is measured by the firmware's arena beside its prediction:
+    // carved at most as predicted, short of it by the unneeded alignment padding only.
+    let stages: Vec<(&str, u64, u64)> = report["memory"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|l| l["kind"] == "stage")
+        .map(|l| {
+            let n = |k: &str| l[k].as_u64().unwrap();
+            (
+                l["name"].as_str().unwrap(),
+                n("predicted_bytes"),
+                n("measured_bytes"),
+            )
+        })
+        .collect();
+    let names: Vec<&str> = stages.iter().map(|s| s.0).collect();
+    assert_eq!(
+        names,
+        [
+            "firmware (stage)",
+            "sift (stage)",
+            "features (stage)",
+            "match (stage)",
+            "adjust (stage)",
+            "traverse (stage)"
+        ]
+    );
+    for (name, predicted, carved) in &stages {
+        assert!(
+            carved <= predicted && predicted - carved < 200,
+            "{name}: {carved} of {predicted}"
+        );
+    }
 
     // Over a lossy, noisy link with the default options (the firmware a child
     // process, the default chunks and time-outs), everything is retransmitted,

@@ -42,6 +42,7 @@ pub fn sample_messages(chunk: &[u8]) -> [Message<'_>; 16] {
             predicted_bytes: 1,
             frame_bytes: 2,
             capacity_bytes: 3,
+            carved_bytes: [4, 5, 6, 7, 8, 9],
         }),
         Message::FrameBegin(FrameBegin {
             epoch: 7,

@@ -336,9 +336,27 @@ impl SiftConfig {
         libm::ceilf(reach.max(ori_reach)) as usize + 3
     }
 
-    /// Adds the extractor's components: working buffers (`Working`) and the keypoint
-    /// storage (`Storage`), all named `sift.*`.
+    /// Adds the extractor's components: its working buffers ([`Self::working_budget`])
+    /// and the keypoint storage of one image (`Storage`), all named `sift.*`.
     pub fn budget(&self, budget: &mut MemoryBudget) -> Result<(), SiftError> {
+        self.working_budget(budget)?;
+        budget.add(
+            "sift.keypoints",
+            ComponentKind::Storage,
+            slice_bytes::<Keypoint>(self.max_keypoints),
+        );
+        budget.add(
+            "sift.descriptors",
+            ComponentKind::Storage,
+            slice_bytes::<Descriptor>(self.max_keypoints),
+        );
+        Ok(())
+    }
+
+    /// Adds what [`Sift::new`](super::Sift::new) carves: the working buffers
+    /// (`Working`), named `sift.*`. A pipeline that keeps several images' features
+    /// adds their storage itself.
+    pub fn working_budget(&self, budget: &mut MemoryBudget) -> Result<(), SiftError> {
         let g = self.geometry()?;
         let w = self.max_width;
         let h = self.max_height;
@@ -382,16 +400,6 @@ impl SiftConfig {
             "sift.desc_weights",
             ComponentKind::Working,
             slice_bytes::<f32>(DESC_GRID * DESC_GRID),
-        );
-        budget.add(
-            "sift.keypoints",
-            ComponentKind::Storage,
-            slice_bytes::<Keypoint>(self.max_keypoints),
-        );
-        budget.add(
-            "sift.descriptors",
-            ComponentKind::Storage,
-            slice_bytes::<Descriptor>(self.max_keypoints),
         );
         Ok(())
     }

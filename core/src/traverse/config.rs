@@ -278,15 +278,7 @@ impl TraverseConfig {
     /// The whole budget: frames excluded (the caller owns them), every stage included.
     pub fn budget(&self, budget: &mut MemoryBudget) -> Result<(), crate::sift::SiftError> {
         // The extractor's working buffers; its feature storage is the four sets below.
-        let mut sift = MemoryBudget::new();
-        self.sift.budget(&mut sift)?;
-        for c in sift
-            .components()
-            .iter()
-            .filter(|c| c.kind == ComponentKind::Working)
-        {
-            budget.add(c.name, c.kind, c.bytes);
-        }
+        self.sift.working_budget(budget)?;
         let n = self.features_per_image();
         FeatureSet::budget(
             n,
@@ -336,6 +328,11 @@ impl TraverseConfig {
             "traverse.correspondences",
             ComponentKind::Working,
             slice_bytes::<Correspondence>(self.matching.max_tie_points),
+        );
+        budget.add(
+            "traverse.window_inputs",
+            ComponentKind::Storage,
+            slice_bytes::<u32>(self.adjust.window),
         );
         Ok(())
     }

@@ -39,7 +39,7 @@ pub use window_view::WindowObservation;
 use crate::adjust::geometry::camera_pose;
 use crate::adjust::quality::chi2_quantile;
 use crate::adjust::{intersect, resect, AdjustError, Correspondence, Observation, Ray, Window};
-use crate::budget::{Arena, OutOfMemory};
+use crate::budget::{Arena, OutOfMemory, Stage};
 use crate::camera::{angles_from_rotation, Camera, Pose};
 use crate::features::FeatureSet;
 use crate::image::ImageView;
@@ -215,15 +215,20 @@ impl<'a> Traverse<'a> {
     /// Builds every stage from `arena` (size it with [`TraverseConfig::budget`]).
     pub fn new(cfg: TraverseConfig, arena: &mut Arena<'a>) -> Result<Self, TraverseError> {
         check_config(&cfg)?;
+        arena.stage(Stage::Sift);
         let sift = Sift::new(cfg.sift, arena)?;
         let n = cfg.features_per_image();
+        arena.stage(Stage::Features);
         let features = [
             [FeatureSet::new(arena, n)?, FeatureSet::new(arena, n)?],
             [FeatureSet::new(arena, n)?, FeatureSet::new(arena, n)?],
         ];
+        arena.stage(Stage::Match);
         let matcher = Matcher::new(cfg.matching, arena)?;
+        arena.stage(Stage::Adjust);
         let mut window = Window::new(cfg.adjust, &cfg.rig, arena)?;
         window.set_base_length(cfg.rig.base_length());
+        arena.stage(Stage::Traverse);
         let track_points = arena.alloc_slice::<TrackPoint>(cfg.matching.max_tracks)?;
         track_points.fill(NO_POINT);
         let (patches, refined, area) = match cfg.patch_capacity() {

@@ -4,6 +4,7 @@ extern crate std;
 use super::*;
 use crate::budget::MemoryBudget;
 use crate::camera::{Interior, Rig};
+use std::format;
 use std::vec;
 use std::vec::Vec;
 
@@ -131,6 +132,20 @@ fn budget_predicts_what_the_traverse_carves() {
     assert!(used <= budget.total(), "{used} > {}", budget.total());
     // Only alignment padding separates the prediction from the measurement.
     assert!(budget.total() - used < 64 * budget.components().len());
+    // Stage by stage too: each stage carves what its components predict, less the
+    // padding its slices did not need (at most 7 bytes each, here fewer than 20 slices).
+    let carved = arena.carved();
+    for stage in Stage::ALL {
+        let prefix = format!("{}.", stage.prefix());
+        let predicted = budget.total_with_prefix(&prefix);
+        let c = carved[stage as usize];
+        assert!(
+            c <= predicted && predicted - c < 8 * 20,
+            "{prefix}: carved {c}, predicted {predicted}"
+        );
+    }
+    assert_eq!(carved[Stage::Firmware as usize], 0);
+    assert!(carved[Stage::Adjust as usize] > 0 && carved[Stage::Features as usize] > 0);
 }
 
 #[test]

@@ -444,9 +444,15 @@ fn memory_table(lines: &[MemoryLine]) -> String {
     );
     for l in lines {
         let measured = l.measured_bytes.map_or("-".to_string(), |m| m.to_string());
+        // A stage's total (and the whole's) carries the measurement: set it apart.
+        let style = if l.measured_bytes.is_some() {
+            " style=\"font-weight:bold\""
+        } else {
+            ""
+        };
         let _ = write!(
             t,
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            "<tr{style}><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             html_escape(&l.name),
             html_escape(&l.kind),
             l.predicted_bytes,

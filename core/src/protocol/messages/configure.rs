@@ -1,6 +1,7 @@
 //! The configuration the host sends (rig, pipeline settings, traverse settings), its
 //! limits, and the firmware's acceptance.
 use super::*;
+use crate::budget::Stage;
 use crate::camera::{CalibrationPrecision, DistortionModel, Interior, Rig};
 
 /// Payload version of [`Configure`] this build writes. Later versions append
@@ -414,7 +415,8 @@ repr!(
     }
 );
 
-/// Firmware -> host: the configuration fits; its predicted memory.
+/// Firmware -> host: the configuration fits; its predicted memory, and what building
+/// the processor carved.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ConfigAccepted {
     /// Predicted bytes of the whole configuration (frames included).
@@ -423,6 +425,10 @@ pub struct ConfigAccepted {
     pub frame_bytes: u32,
     /// Working storage available.
     pub capacity_bytes: u32,
+    /// Bytes the arena carved per stage while the firmware built its buffers, in the
+    /// order of [`Stage::ALL`](crate::budget::Stage::ALL) (padding included): the
+    /// measurement beside each stage's predicted components.
+    pub carved_bytes: [u32; Stage::ALL.len()],
 }
 repr!(
     ConfigAccepted,
@@ -432,11 +438,13 @@ repr!(
             predicted_bytes: r.u32()?,
             frame_bytes: r.u32()?,
             capacity_bytes: r.u32()?,
+            carved_bytes: r.u32s()?,
         })
     },
     |s, w| {
         w.u32(s.predicted_bytes)?;
         w.u32(s.frame_bytes)?;
         w.u32(s.capacity_bytes)?;
+        w.u32s(&s.carved_bytes)?;
     }
 );
