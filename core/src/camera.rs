@@ -643,6 +643,14 @@ impl Rig {
         }
     }
 
+    /// The interior orientation of `camera`.
+    pub fn interior(&self, camera: Camera) -> &Interior {
+        match camera {
+            Camera::Left => &self.left,
+            Camera::Right => &self.right,
+        }
+    }
+
     pub fn relative_rotation(&self) -> Matrix3<f64> {
         self.relative().rotation()
     }

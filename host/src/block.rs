@@ -604,30 +604,79 @@ pub struct Adjusted {
 
 /// Corrected photo-coordinates (mm) of a pixel observation.
 fn corrected(rig: &Rig, o: &PixelObservation) -> [f64; 2] {
-    let cam = if o.camera == Camera::Left {
-        &rig.left
-    } else {
-        &rig.right
-    };
-    cam.pixel_to_corrected(o.px[0], o.px[1])
+    rig.interior(o.camera).pixel_to_corrected(o.px[0], o.px[1])
+}
+
+/// The block's points in first-seen order, each with the indices of its observations.
+struct PointObservations {
+    order: Vec<u64>,
+    of: HashMap<u64, Vec<usize>>,
+}
+
+impl PointObservations {
+    fn of(block: &Block) -> Self {
+        let mut order: Vec<u64> = Vec::new();
+        let mut of: HashMap<u64, Vec<usize>> = HashMap::new();
+        for (i, o) in block.observations.iter().enumerate() {
+            of.entry(o.point)
+                .or_insert_with(|| {
+                    order.push(o.point);
+                    Vec::new()
+                })
+                .push(i);
+        }
+        PointObservations { order, of }
+    }
 }
 
 /// Adjusts a block with the core's window (one window holding every epoch).
 pub fn adjust(block: &Block) -> Result<Adjusted> {
-    let s = &block.settings;
-    let n_epochs = block.images.len();
-    // Points and their observations, in first-seen order.
-    let mut order: Vec<u64> = Vec::new();
-    let mut by_point: HashMap<u64, Vec<usize>> = HashMap::new();
-    for (i, o) in block.observations.iter().enumerate() {
-        by_point.entry(o.point).or_insert_with(|| {
-            order.push(o.point);
-            Vec::new()
-        });
-        by_point.get_mut(&o.point).expect("inserted").push(i);
+    let points = PointObservations::of(block);
+    let cfg = window_config(block, &points);
+    let mut budget = MemoryBudget::new();
+    cfg.budget(&mut budget);
+    let mut mem = vec![0u8; budget.total()];
+    let mut arena = Arena::new(&mut mem);
+    let mut w = Window::new(cfg, &block.rig, &mut arena).map_err(|e| anyhow!("adjustment: {e}"))?;
+    add_epochs(&mut w, block)?;
+    let (index, mut skipped) = add_points(&mut w, block, &points)?;
+    add_observations(&mut w, block, &index)?;
+    let report = w.solve().map_err(|e| match e {
+        phototraverse_core::adjust::AdjustError::Singular { epoch } => {
+            anyhow!("adjustment failed: {e} (epoch {epoch} of images.txt is not determined by its points)")
+        }
+        _ => anyhow!("adjustment failed: {e}"),
+    })?;
+    let images = adjusted_images(&w, block.images.len());
+    let mut adjusted_points = Vec::new();
+    for pid in &points.order {
+        let Some(&id) = index.get(pid) else { continue };
+        match (w.point(id), w.point_std(id)) {
+            (Some(xyz), Some(std)) => adjusted_points.push(AdjustedPoint {
+                point: *pid,
+                xyz,
+                std,
+                observations: points.of[pid].len(),
+            }),
+            _ => skipped.push(*pid),
+        }
     }
-    let control: BTreeMap<u64, ControlPoint> =
-        block.control.iter().map(|c| (c.point, *c)).collect();
+    Ok(Adjusted {
+        report,
+        images,
+        points: adjusted_points,
+        skipped_points: skipped,
+        flagged: flagged(&w, block),
+        rig: w.rig(),
+        rig_std: w.rig_std(),
+        budget_bytes: budget.total_with_prefix("adjust."),
+    })
+}
+
+/// The window for the whole block: every epoch, point and observation, the settings'
+/// robust estimator and constraints.
+fn window_config(block: &Block, points: &PointObservations) -> AdjustConfig {
+    let s = &block.settings;
     let robust = match s.robust {
         RobustKind::Snooping => Robust::snooping(),
         RobustKind::None => Robust::None,
@@ -635,9 +684,9 @@ pub fn adjust(block: &Block) -> Result<Adjusted> {
             threshold_mm: block.rig.left.pixel_size_mm[0],
         },
     };
-    let cfg = AdjustConfig {
-        window: n_epochs,
-        max_points: order.len().max(1),
+    AdjustConfig {
+        window: block.images.len(),
+        max_points: points.order.len().max(1),
         max_observations: block.observations.len().max(1),
         max_iterations: s.max_iterations,
         estimate_rig: s.estimate_rig,
@@ -651,13 +700,12 @@ pub fn adjust(block: &Block) -> Result<Adjusted> {
         },
         robust,
         ..AdjustConfig::default()
-    };
-    let mut budget = MemoryBudget::new();
-    cfg.budget(&mut budget);
-    let mut mem = vec![0u8; budget.total()];
-    let mut arena = Arena::new(&mut mem);
-    let mut w = Window::new(cfg, &block.rig, &mut arena).map_err(|e| anyhow!("adjustment: {e}"))?;
-    if let Some((b, _)) = s.base_length {
+    }
+}
+
+/// The epochs with their start poses, and the GNSS and odometer observations.
+fn add_epochs(w: &mut Window, block: &Block) -> Result<()> {
+    if let Some((b, _)) = block.settings.base_length {
         w.set_base_length(b);
     }
     for im in &block.images {
@@ -672,29 +720,34 @@ pub fn adjust(block: &Block) -> Result<Adjusted> {
         w.set_odometer(*e, *d, *sg)
             .map_err(|er| anyhow!("odometer epoch {e}: {er}"))?;
     }
+    Ok(())
+}
+
+/// The points: control points at their coordinates with their prior, tie points at
+/// the intersection of their rays from the start poses. Returns the window's id of
+/// each point and the points that did not intersect.
+fn add_points(
+    w: &mut Window,
+    block: &Block,
+    points: &PointObservations,
+) -> Result<(HashMap<u64, u32>, Vec<u64>)> {
+    let control: BTreeMap<u64, ControlPoint> =
+        block.control.iter().map(|c| (c.point, *c)).collect();
     let rp = RelativeOrientation::from_rig(&block.rig);
-    let focal = |c: Camera| {
-        if c == Camera::Left {
-            block.rig.left.focal_mm
-        } else {
-            block.rig.right.focal_mm
-        }
-    };
     let mut index: HashMap<u64, u32> = HashMap::new();
     let mut skipped = Vec::new();
-    for pid in &order {
-        let obs = &by_point[pid];
+    for pid in &points.order {
         let start = match control.get(pid) {
             Some(c) => Some(c.xyz),
             None => {
-                let rays: Vec<Ray> = obs
+                let rays: Vec<Ray> = points.of[pid]
                     .iter()
                     .map(|&i| {
                         let o = &block.observations[i];
                         let left = block.images[o.epoch as usize].pose;
                         Ray {
                             pose: camera_pose(&left, &rp, o.camera),
-                            focal_mm: focal(o.camera),
+                            focal_mm: block.rig.interior(o.camera).focal_mm,
                             xy: corrected(&block.rig, o),
                         }
                     })
@@ -713,7 +766,13 @@ pub fn adjust(block: &Block) -> Result<Adjusted> {
         }
         index.insert(*pid, id);
     }
-    // Observations with their weights; the parallax scheme needs the stereo partner.
+    Ok((index, skipped))
+}
+
+/// The image observations of the points in the window, weighted as the settings say;
+/// each keeps its index in the block as its tag.
+fn add_observations(w: &mut Window, block: &Block, index: &HashMap<u64, u32>) -> Result<()> {
+    // The parallax scheme needs the stereo partner.
     let mut partner: HashMap<(u64, u32, u8), [f64; 2]> = HashMap::new();
     for o in &block.observations {
         partner.insert((o.point, o.epoch, o.camera as u8), corrected(&block.rig, o));
@@ -723,46 +782,53 @@ pub fn adjust(block: &Block) -> Result<Adjusted> {
             continue;
         };
         let xy = corrected(&block.rig, o);
-        let cam = if o.camera == Camera::Left {
-            &block.rig.left
-        } else {
-            &block.rig.right
-        };
-        let wt = match s.weighting {
-            Weighting::Sigma => {
-                let sx = s.sigma_px * cam.pixel_size_mm[0];
-                let sy = s.sigma_px * cam.pixel_size_mm[1];
-                [1.0 / (sx * sx), 1.0 / (sy * sy)]
-            }
-            Weighting::Parallax => {
-                let other = partner
-                    .get(&(o.point, o.epoch, 1 - o.camera as u8))
-                    .copied();
-                // Parallax = left minus right whichever image this is.
-                let (l, r) = match (o.camera, other) {
-                    (Camera::Left, Some(q)) => (xy, Some(q)),
-                    (Camera::Right, Some(q)) => (q, Some(xy)),
-                    _ => (xy, None),
-                };
-                weights(Scheme::Parallax, l, r)
-            }
-            Weighting::Radial => weights(Scheme::Radial, xy, None),
-            Weighting::Equal => weights(Scheme::Equal, xy, None),
-        };
+        let other = partner
+            .get(&(o.point, o.epoch, 1 - o.camera as u8))
+            .copied();
+        let wt = observation_weight(block, o, xy, other);
         let wt = [wt[0].max(1e-12), wt[1].max(1e-12)];
         let mut ob = Observation::new(o.epoch, o.camera, pid, xy, wt);
         ob.tag = i as u32;
         w.add_observation(ob)
             .map_err(|e| anyhow!("observations.txt:{}: {e}", o.line))?;
     }
-    let report = w.solve().map_err(|e| match e {
-        phototraverse_core::adjust::AdjustError::Singular { epoch } => {
-            anyhow!("adjustment failed: {e} (epoch {epoch} of images.txt is not determined by its points)")
-        }
-        _ => anyhow!("adjustment failed: {e}"),
-    })?;
+    Ok(())
+}
 
-    let rig_now = w.rig();
+/// The weights of an observation at corrected coordinates `xy` (its stereo partner's
+/// at `other`) by the settings' scheme.
+fn observation_weight(
+    block: &Block,
+    o: &PixelObservation,
+    xy: [f64; 2],
+    other: Option<[f64; 2]>,
+) -> [f64; 2] {
+    let s = &block.settings;
+    match s.weighting {
+        Weighting::Sigma => {
+            let cam = block.rig.interior(o.camera);
+            let sx = s.sigma_px * cam.pixel_size_mm[0];
+            let sy = s.sigma_px * cam.pixel_size_mm[1];
+            [1.0 / (sx * sx), 1.0 / (sy * sy)]
+        }
+        Weighting::Parallax => {
+            // Parallax = left minus right whichever image this is.
+            let (l, r) = match (o.camera, other) {
+                (Camera::Left, Some(q)) => (xy, Some(q)),
+                (Camera::Right, Some(q)) => (q, Some(xy)),
+                _ => (xy, None),
+            };
+            weights(Scheme::Parallax, l, r)
+        }
+        Weighting::Radial => weights(Scheme::Radial, xy, None),
+        Weighting::Equal => weights(Scheme::Equal, xy, None),
+    }
+}
+
+/// Both cameras of every epoch, with their standard deviations (the right camera's
+/// propagated from the left's through the adjusted rig).
+fn adjusted_images(w: &Window, n_epochs: usize) -> Vec<AdjustedImage> {
+    let rig = w.rig();
     let mut images = Vec::new();
     for slot in 0..n_epochs {
         let left = w.epoch_pose(slot).expect("epoch");
@@ -775,27 +841,19 @@ pub fn adjust(block: &Block) -> Result<Adjusted> {
             pose: left,
             std,
         });
-        let right = camera_pose(&left, &rig_now, Camera::Right);
         images.push(AdjustedImage {
             epoch,
             camera: Camera::Right,
-            pose: right,
-            std: standard_deviations(&right_camera_covariance(&left, &rig_now, &cov)),
+            pose: camera_pose(&left, &rig, Camera::Right),
+            std: standard_deviations(&right_camera_covariance(&left, &rig, &cov)),
         });
     }
-    let mut points = Vec::new();
-    for pid in &order {
-        let Some(&id) = index.get(pid) else { continue };
-        match (w.point(id), w.point_std(id)) {
-            (Some(xyz), Some(std)) => points.push(AdjustedPoint {
-                point: *pid,
-                xyz,
-                std,
-                observations: by_point[pid].len(),
-            }),
-            _ => skipped.push(*pid),
-        }
-    }
+    images
+}
+
+/// The observations the robust estimator flagged, with their residuals in pixels
+/// (observed - computed, columns right, rows down).
+fn flagged(w: &Window, block: &Block) -> Vec<Flagged> {
     let mut flagged = Vec::new();
     for (k, o) in w.observations().iter().enumerate() {
         if !o.is_flagged() {
@@ -803,27 +861,13 @@ pub fn adjust(block: &Block) -> Result<Adjusted> {
         }
         let src = block.observations[o.tag as usize];
         let r = w.residual(k).unwrap_or([f64::NAN; 2]);
-        let cam = if src.camera == Camera::Left {
-            &block.rig.left
-        } else {
-            &block.rig.right
-        };
-        // Residual observed - computed, in pixels (columns right, rows down).
+        let cam = block.rig.interior(src.camera);
         flagged.push(Flagged {
             obs: src,
             residual_px: [r[0] / cam.pixel_size_mm[0], -r[1] / cam.pixel_size_mm[1]],
         });
     }
-    Ok(Adjusted {
-        report,
-        images,
-        points,
-        skipped_points: skipped,
-        flagged,
-        rig: rig_now,
-        rig_std: w.rig_std(),
-        budget_bytes: budget.total_with_prefix("adjust."),
-    })
+    flagged
 }
 
 /// The observation file's camera code, `L` or `R`.

@@ -308,10 +308,7 @@ fn observation(
     px: [f32; 2],
     tag: u32,
 ) -> Observation {
-    let interior = match camera {
-        Camera::Left => &cfg.rig.left,
-        Camera::Right => &cfg.rig.right,
-    };
+    let interior = cfg.rig.interior(camera);
     let xy = interior.pixel_to_corrected(px[0] as f64, px[1] as f64);
     let s = cfg.sigma_px;
     let [sx, sy] = interior.pixel_size_mm;
