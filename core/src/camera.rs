@@ -17,6 +17,9 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+mod rigid;
+pub(crate) use rigid::{rigid_fit, RigidMotion};
+
 /// Smallest `-w` (object units along the viewing direction) for a point to count
 /// as in front of the camera.
 pub const MIN_DEPTH: f64 = 1e-9;
@@ -844,9 +847,6 @@ pub fn pose_from_kitti(origin: &Pose, kitti: &[[f64; 4]; 3]) -> Pose {
     let ck = origin.centre_vec() + m0.transpose() * (f * t);
     Pose::from_rotation(&mk, [ck[0], ck[1], ck[2]])
 }
-
-mod rigid;
-pub use rigid::{rigid_fit, RigidMotion};
 
 #[cfg(test)]
 mod tests;

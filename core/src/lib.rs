@@ -5,8 +5,8 @@
 //! configuration, so the same code runs on a microcontroller and on the host.
 //!
 //! Data flows one way through the modules, one per pipeline stage:
-//! [`image`] -> `sift` -> `matching` -> [`camera`] -> `adjust` -> `traverse`;
-//! `protocol` carries frames in and results out. It is a leaf on [`camera`],
+//! [`image`] -> [`sift`] -> [`matching`] -> [`camera`] -> [`adjust`] -> [`traverse`];
+//! [`protocol`] carries frames in and results out. It is a leaf on [`camera`],
 //! [`image`] and [`budget`] types with its own codes for modes, statuses and flags: the firmware
 //! maps them to the traverse's, so the wire format stays put when the pipeline moves.
 //!

@@ -610,28 +610,29 @@ fn corrected(rig: &Rig, o: &PixelObservation) -> [f64; 2] {
 /// The block's points in first-seen order, each with the indices of its observations.
 struct PointObservations {
     order: Vec<u64>,
-    of: HashMap<u64, Vec<usize>>,
+    by_point: HashMap<u64, Vec<usize>>,
 }
 
 impl PointObservations {
-    fn of(block: &Block) -> Self {
+    fn from_block(block: &Block) -> Self {
         let mut order: Vec<u64> = Vec::new();
-        let mut of: HashMap<u64, Vec<usize>> = HashMap::new();
+        let mut by_point: HashMap<u64, Vec<usize>> = HashMap::new();
         for (i, o) in block.observations.iter().enumerate() {
-            of.entry(o.point)
+            by_point
+                .entry(o.point)
                 .or_insert_with(|| {
                     order.push(o.point);
                     Vec::new()
                 })
                 .push(i);
         }
-        PointObservations { order, of }
+        PointObservations { order, by_point }
     }
 }
 
 /// Adjusts a block with the core's window (one window holding every epoch).
 pub fn adjust(block: &Block) -> Result<Adjusted> {
-    let points = PointObservations::of(block);
+    let points = PointObservations::from_block(block);
     let cfg = window_config(block, &points);
     let mut budget = MemoryBudget::new();
     cfg.budget(&mut budget);
@@ -656,7 +657,7 @@ pub fn adjust(block: &Block) -> Result<Adjusted> {
                 point: *pid,
                 xyz,
                 std,
-                observations: points.of[pid].len(),
+                observations: points.by_point[pid].len(),
             }),
             _ => skipped.push(*pid),
         }
@@ -740,7 +741,7 @@ fn add_points(
         let start = match control.get(pid) {
             Some(c) => Some(c.xyz),
             None => {
-                let rays: Vec<Ray> = points.of[pid]
+                let rays: Vec<Ray> = points.by_point[pid]
                     .iter()
                     .map(|&i| {
                         let o = &block.observations[i];
@@ -833,7 +834,9 @@ fn adjusted_images(w: &Window, n_epochs: usize) -> Vec<AdjustedImage> {
     for slot in 0..n_epochs {
         let left = w.epoch_pose(slot).expect("epoch");
         let std = w.epoch_std(slot).unwrap_or([f64::NAN; 6]);
-        let cov = w.epoch_covariance(slot).unwrap_or([0.0; 36]);
+        let right_std = w.epoch_covariance(slot).map_or([f64::NAN; 6], |c| {
+            standard_deviations(&right_camera_covariance(&left, &rig, &c))
+        });
         let epoch = w.epoch_id(slot).expect("epoch");
         images.push(AdjustedImage {
             epoch,
@@ -845,7 +848,7 @@ fn adjusted_images(w: &Window, n_epochs: usize) -> Vec<AdjustedImage> {
             epoch,
             camera: Camera::Right,
             pose: camera_pose(&left, &rig, Camera::Right),
-            std: standard_deviations(&right_camera_covariance(&left, &rig, &cov)),
+            std: right_std,
         });
     }
     images

@@ -507,7 +507,7 @@ impl<'d> Run<'d> {
         let rig = self.rig;
         let lever_arm = self.ds.gnss_setup.lever_arm_m;
         self.report.smoothing =
-            smoothing::smooth_over_fixes(&mut self.report.epochs, lever_arm, |p| rig.right_pose(p));
+            smoothing::smooth_over_fixes(&mut self.report.epochs, lever_arm, &rig.relative());
         if self.report.smoothing.is_none() {
             return Ok(());
         }

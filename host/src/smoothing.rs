@@ -25,14 +25,16 @@
 //!
 //! Least squares over this chain is the fixed-interval (Rauch-Tung-Striebel) smoother
 //! of a random walk, O(n) with the smoothed variances, whose square roots replace the
-//! firmware's standard deviations of the centres; the attitudes are not changed. `q`
+//! firmware's standard deviations of the centres; the attitudes are not changed. The right
+//! cameras follow through the rig, their standard deviations from the left camera's. `q`
 //! is estimated from the data by variance component estimation (Förstner's iteration
 //! `q <- q * sum(v^2 / q) / r`, `r` the redundancy numbers of the steps without `D`),
 //! since the images' step precision depends on the scene and the rig; the fixes'
 //! sigmas are taken as given.
 use crate::dataset::aiding;
 use crate::report::EpochRecord;
-use phototraverse_core::camera::Pose;
+use phototraverse_core::adjust::{right_camera_covariance, standard_deviations};
+use phototraverse_core::camera::{Pose, RelativeOrientation};
 
 /// How much less a step from two output positions weighs than one from a window
 /// adjustment: the output positions each carry a fix's pull, the window's steps do not.
@@ -101,12 +103,12 @@ struct Smoothed {
 
 /// Smooths the left centres of `epochs` over their GNSS fixes (`gnss` records), with
 /// the fixes' antenna at `lever_arm_m`. Updates the centres, their standard deviations,
-/// the right cameras by `right_of` and the fixes' residuals. `None` (and nothing
-/// changed) without fixes.
+/// the right cameras through the rig's relative orientation `rig`, and the fixes'
+/// residuals. `None` (and nothing changed) without fixes.
 pub fn smooth_over_fixes(
     epochs: &mut [EpochRecord],
     lever_arm_m: [f64; 3],
-    right_of: impl Fn(&Pose) -> Pose,
+    rig: &RelativeOrientation,
 ) -> Option<SmoothingSummary> {
     let fixes = epochs.iter().filter(|e| e.gnss.is_some()).count();
     if fixes == 0 || epochs.len() < 2 {
@@ -116,7 +118,7 @@ pub fn smooth_over_fixes(
     let chains: Vec<Chain> = (0..3).map(|c| chain(epochs, &fixed, c)).collect();
     let q = estimate_step_variance(&chains);
     let solved: Vec<Smoothed> = chains.iter().map(|ch| smooth(ch, q)).collect();
-    let (rms_shift_m, largest_shift_m) = apply(epochs, &solved, lever_arm_m, right_of);
+    let (rms_shift_m, largest_shift_m) = apply(epochs, &solved, lever_arm_m, rig);
     Some(SmoothingSummary {
         fixes,
         step_sd_m: q.sqrt(),
@@ -143,14 +145,14 @@ fn estimate_step_variance(chains: &[Chain]) -> f64 {
 }
 
 /// Puts the smoothed centres and their standard deviations into `epochs` (keeping the
-/// firmware's centres as `realtime_centre_m`), places the right cameras (and their
-/// centres' standard deviations) again and
-/// updates the fixes' residuals. Returns how far the centres moved: RMS and largest.
+/// firmware's centres as `realtime_centre_m`), places the right cameras again with
+/// their standard deviations, and updates the fixes' residuals. Returns how far the
+/// centres moved: RMS and largest.
 fn apply(
     epochs: &mut [EpochRecord],
     solved: &[Smoothed],
     lever_arm_m: [f64; 3],
-    right_of: impl Fn(&Pose) -> Pose,
+    rig: &RelativeOrientation,
 ) -> (f64, f64) {
     let (mut sum_sq, mut largest) = (0.0f64, 0.0f64);
     for (k, e) in epochs.iter_mut().enumerate() {
@@ -163,29 +165,36 @@ fn apply(
         (e.left.x, e.left.y, e.left.z) = (new[0], new[1], new[2]);
         // An epoch without the firmware's precision (the datum epoch, a predicted one)
         // has no attitude precision either: it stays without.
-        // The right centre keeps what the rig adds to the left's variance (the
-        // attitude's uncertainty turning the base), on the smoothed left variance.
         if let Some(sigma) = e.left.sigma.as_mut() {
             for c in 0..3 {
-                let smoothed = solved[c].var[k];
-                if let Some(right) = e.right.sigma.as_mut() {
-                    let added = right[3 + c].powi(2) - sigma[3 + c].powi(2);
-                    right[3 + c] = (smoothed + added).max(0.0).sqrt();
-                }
-                sigma[3 + c] = smoothed.sqrt();
+                sigma[3 + c] = solved[c].var[k].sqrt();
             }
         }
-        let right = right_of(&e.left.to_pose());
-        e.right = crate::report::CameraEop {
-            sigma: e.right.sigma,
-            ..crate::report::CameraEop::from_pose(&right, None)
-        };
+        let left = e.left.to_pose();
+        e.right = crate::report::CameraEop::from_pose(
+            &rig.right_pose(&left),
+            e.left.sigma.map(|s| right_sigma(&left, rig, &s)),
+        );
         if let Some(g) = e.gnss.as_mut() {
             let antenna = aiding::antenna_position(&e.left.to_pose(), lever_arm_m);
             g.residual_m = [0, 1, 2].map(|c| antenna[c] - g.position[c]);
         }
     }
     ((sum_sq / epochs.len() as f64).sqrt(), largest)
+}
+
+/// The right camera's standard deviations (radians and metres) from the left's
+/// `sigma_deg_m` (attitude from the firmware, centre smoothed), through the rig: the
+/// attitude's uncertainty turns the base onto the right centre. The correlations
+/// between attitude and centre are left out: the smoothing changed the centres'
+/// precision without them.
+fn right_sigma(left: &Pose, rig: &RelativeOrientation, sigma_deg_m: &[f64; 6]) -> [f64; 6] {
+    let mut cov = [0.0; 36];
+    for (k, s) in sigma_deg_m.iter().enumerate() {
+        let s = if k < 3 { s.to_radians() } else { *s };
+        cov[k * 7] = s * s;
+    }
+    standard_deviations(&right_camera_covariance(left, rig, &cov))
 }
 
 /// Each fix as an observation of its epoch's centre, with its variance per coordinate.
@@ -293,6 +302,12 @@ mod tests {
     use crate::report::{CameraEop, EpochStatus, GnssRecord};
     use rand::{Rng, SeedableRng};
 
+    /// A rig whose right camera is the left one: the tests of the centres alone.
+    const ONE_PLACE: RelativeOrientation = RelativeOrientation {
+        angles: [0.0; 3],
+        base: [0.0; 3],
+    };
+
     /// A straight drive along Y at 2 m per epoch; the records carry the images' steps
     /// with `step_error(k)` added and their positions are the sum of those steps.
     fn drive(
@@ -354,7 +369,7 @@ mod tests {
     fn nothing_changes_without_fixes() {
         let (mut records, _) = drive(20, |_| None, |_| [0.001, 0.0, 0.0]);
         let before = records.clone();
-        assert_eq!(smooth_over_fixes(&mut records, [0.0; 3], |p| *p), None);
+        assert_eq!(smooth_over_fixes(&mut records, [0.0; 3], &ONE_PLACE), None);
         assert_eq!(format!("{records:?}"), format!("{before:?}"));
     }
 
@@ -374,7 +389,7 @@ mod tests {
                 g.sigma_m = 1e-4;
             }
         }
-        let summary = smooth_over_fixes(&mut records, [0.0; 3], |p| *p).unwrap();
+        let summary = smooth_over_fixes(&mut records, [0.0; 3], &ONE_PLACE).unwrap();
         assert_eq!(summary.fixes, 79);
         let worst = (40..=60)
             .map(|k| error(&records[k], truth[k]))
@@ -415,26 +430,32 @@ mod tests {
                 0.0
             };
             let sd = (0.003f64.powi(2) + grown).sqrt();
-            r.left.sigma = Some([1e-4, 1e-4, 1e-4, sd, sd, sd]);
-            // The rig adds (4 mm)^2 to the right centre's variance.
-            let right = (sd * sd + 1.6e-5).sqrt();
-            r.right.sigma = Some([1e-4, 1e-4, 1e-4, right, right, right]);
+            let a = 1e-4f64.to_degrees();
+            r.left.sigma = Some([a, a, a, sd, sd, sd]);
         }
-        smooth_over_fixes(&mut records, [0.0; 3], |p| *p).unwrap();
+        // A 0.5 m base along X (the cameras look along Y).
+        let rig = RelativeOrientation {
+            angles: [0.0; 3],
+            base: [0.5, 0.0, 0.0],
+        };
+        smooth_over_fixes(&mut records, [0.0; 3], &rig).unwrap();
         let worst = (40..=60)
             .map(|k| error(&records[k], truth[k]))
             .fold(0.0, f64::max);
         assert!(worst < 0.01, "largest error inside the outage {worst}");
-        // The right centres' standard deviations follow the smoothed left ones and keep
-        // what the rig adds.
+        // The right cameras sit 0.5 m to the right with the smoothed left centres'
+        // precision, plus the attitude's 0.1 mrad turning the base: (0.05 mm)^2 in Y
+        // (phi) and Z (kappa), nothing along the base.
         for r in &records {
             let (l, rt) = (r.left.sigma.unwrap(), r.right.sigma.unwrap());
-            for c in 3..6 {
-                assert!(
-                    (rt[c].powi(2) - l[c].powi(2) - 1.6e-5).abs() < 1e-12,
-                    "{l:?} {rt:?}"
-                );
-            }
+            assert!((r.right.x - r.left.x - 0.5).abs() < 1e-12);
+            assert!((0..3).all(|k| (rt[k] - l[k]).abs() < 1e-15), "{l:?} {rt:?}");
+            let added = [3, 4, 5].map(|c| rt[c].powi(2) - l[c].powi(2));
+            assert!(added[0].abs() < 1e-15, "{added:?}");
+            assert!(
+                added[1..].iter().all(|a| (a - 2.5e-9).abs() < 1e-13),
+                "{added:?}"
+            );
         }
     }
 
@@ -452,7 +473,7 @@ mod tests {
             |k| Some([0, 1, 2].map(|c| [0.0, 2.0 * k as f64, 0.0][c] + fix_noise[k][c])),
             |k| step_noise[k],
         );
-        let summary = smooth_over_fixes(&mut records, [0.0; 3], |p| *p).unwrap();
+        let summary = smooth_over_fixes(&mut records, [0.0; 3], &ONE_PLACE).unwrap();
         // Estimated within 15 % of the 5 mm the steps were drawn with (the steps'
         // redundancy, about 300 here, makes that about 4 % one sigma).
         assert!((summary.step_sd_m - 0.005).abs() < 7.5e-4, "{summary:?}");

@@ -62,7 +62,7 @@ fn local_sift(img: &[u8], w: u16, h: u16, config: &Configure) -> [u32; 3] {
     use phototraverse_core::sift::Sift;
     let cfg = phototraverse_firmware_sim::processor::sift_config(config);
     let mut budget = MemoryBudget::new();
-    cfg.budget(&mut budget).unwrap();
+    cfg.working_budget(&mut budget).unwrap();
     FeatureSet::budget(cfg.max_keypoints, &mut budget, "kp", "desc");
     let mut storage = vec![0u8; budget.total()];
     let mut arena = Arena::new(&mut storage);

@@ -1,4 +1,4 @@
-//! RigidMotion consistency of the closed quads (LIBVISO2-style, here 3-D to 3-D): a quad
+//! Motion consistency of the closed quads (LIBVISO2-style, here 3-D to 3-D): a quad
 //! closes its loop but can still be wrong consistently (a repeated window matched to
 //! its neighbour in both images). Each quad is triangulated at k-1 (P) and at k (Q) in
 //! its left camera frame; one rigid motion `Q = R P + t` must explain them all. The

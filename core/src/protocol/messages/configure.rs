@@ -428,8 +428,13 @@ pub struct ConfigAccepted {
     /// Bytes the arena carved per stage while the firmware built its buffers, in the
     /// order of [`Stage::ALL`](crate::budget::Stage::ALL) (padding included): the
     /// measurement beside each stage's predicted components.
-    pub carved_bytes: [u32; Stage::ALL.len()],
+    pub carved_bytes: [u32; CARVED_STAGES],
 }
+
+/// Stages in [`ConfigAccepted::carved_bytes`]: fixed on the wire. A new
+/// [`Stage`] needs a new protocol version, which this check asks for.
+pub const CARVED_STAGES: usize = 6;
+const _: () = assert!(Stage::ALL.len() == CARVED_STAGES);
 repr!(
     ConfigAccepted,
     ConfigAccepted,
