@@ -404,6 +404,7 @@ impl<'d> Run<'d> {
             chi2_passed: self.chi2.iter().filter(|t| t.passed).count(),
             chi2_failed: self.chi2.iter().filter(|t| t.statistic > t.upper).count(),
             chi2_below: self.chi2.iter().filter(|t| t.statistic < t.lower).count(),
+            apriori_sigma_px: self.settings.sigma_px,
         })
     }
 

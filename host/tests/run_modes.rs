@@ -1,6 +1,6 @@
 //! End to end through the CLI: `run --mode seed2014 --estimate-rig` on a small
 //! synthetic seed-2014 street completes, says its mode, and reports the rig and the
-//! chi-square counts in report.json.
+//! chi-square counts in report.json, read for people on stdout.
 mod common;
 use common::{ok, phototraverse};
 
@@ -24,7 +24,7 @@ fn run_seed2014_mode_with_the_rig_estimated() {
         "--quiet",
     ]);
     assert!(stdout.contains("mode seed2014: 4 epochs"), "{stdout}");
-    assert!(stdout.contains("chi-square over"), "{stdout}");
+    assert!(stdout.contains("global test over"), "{stdout}");
     assert!(stdout.contains("rig as adjusted"), "{stdout}");
     let text = std::fs::read_to_string(t.path().join("run/report.json")).unwrap();
     let json: serde_json::Value = serde_json::from_str(&text).unwrap();
@@ -38,6 +38,14 @@ fn run_seed2014_mode_with_the_rig_estimated() {
         .iter()
         .sum::<u64>();
     assert_eq!(counts, adjusted, "{q}");
+    // A run below the bound says what the images delivered against the a-priori sigma.
+    assert_eq!(q["apriori_sigma_px"].as_f64(), Some(0.5), "{q}");
+    if q["chi2_below"].as_u64().unwrap() > 0 {
+        let delivered = q["sigma0_median"].as_f64().unwrap() * 0.5;
+        let said =
+            format!("the images delivered about {delivered:.2} px against the a-priori 0.50 px");
+        assert!(stdout.contains(&said), "{stdout}");
+    }
     // Each epoch's test agrees with the summary's counts.
     let epochs = json["epochs"].as_array().unwrap();
     for (key, result) in [

@@ -166,9 +166,10 @@ pub fn summary(o: &RunOutcome) -> String {
     );
     if let Some(q) = &r.quality {
         s += &format!(
-            "sigma0 median {:.3} (max {:.3}); chi-square over {} adjusted epochs: {} passed, \
-             {} failed (above), {} below the lower bound\n",
-            q.sigma0_median, q.sigma0_max, q.adjusted, q.chi2_passed, q.chi2_failed, q.chi2_below
+            "sigma0 median {:.3} (max {:.3}); {}\n",
+            q.sigma0_median,
+            q.sigma0_max,
+            q.test_reading()
         );
     }
     if let Some(g) = &r.rig {

@@ -321,6 +321,36 @@ pub struct QualitySummary {
     pub chi2_passed: usize,
     pub chi2_failed: usize,
     pub chi2_below: usize,
+    /// The a-priori image sigma the weights use, pixels: `sigma0` times it is about
+    /// what the images delivered.
+    #[serde(default)]
+    pub apriori_sigma_px: f64,
+}
+
+impl QualitySummary {
+    /// The image residuals' sigma the median sigma0 implies, pixels.
+    pub fn delivered_sigma_px(&self) -> f64 {
+        self.sigma0_median * self.apriori_sigma_px
+    }
+
+    /// What the counts of the global test mean, for people: "below" reads as a
+    /// failure unless it says that the images did better than the weights assume.
+    pub fn test_reading(&self) -> String {
+        let mut s = format!(
+            "global test over {} adjusted epochs: {} within the bounds, {} above (flagged), \
+             {} below",
+            self.adjusted, self.chi2_passed, self.chi2_failed, self.chi2_below
+        );
+        if self.chi2_below > 0 {
+            s += &format!(
+                " (below: the images delivered about {:.2} px against the a-priori {:.2} px, \
+                 better than the weights assume, which stay pessimistic: docs/adjustment.md)",
+                self.delivered_sigma_px(),
+                self.apriori_sigma_px
+            );
+        }
+        s
+    }
 }
 
 impl RunReport {
