@@ -54,3 +54,41 @@ fn a_reader_that_stops_early_ends_it_quietly() {
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert!(stderr.is_empty(), "{stderr}");
 }
+
+#[test]
+fn a_runs_carved_memory_stands_beside_its_prediction() {
+    use phototraverse_host::report::{MemoryLine, RunReport};
+    let line = |name: &str, kind: &str, predicted: usize, carved: Option<usize>| MemoryLine {
+        name: name.into(),
+        kind: kind.into(),
+        predicted_bytes: predicted,
+        measured_bytes: carved,
+    };
+    let report = RunReport {
+        memory: vec![
+            line("adjust.points", "storage", 1000, None),
+            line("adjust (stage)", "stage", 1000, Some(993)),
+            line("total (firmware arena)", "all", 1000, Some(993)),
+        ],
+        ..RunReport::default()
+    };
+    let t = tempfile::tempdir().unwrap();
+    let path = t.path().join("report.json");
+    std::fs::write(&path, serde_json::to_string(&report).unwrap()).unwrap();
+    let out = ok(&["budget", "--measured", path.to_str().unwrap()]);
+    let lines: Vec<Vec<&str>> = out
+        .lines()
+        .skip_while(|l| !l.starts_with("measured by the run"))
+        .map(|l| l.split_whitespace().collect())
+        .collect();
+    // Only the measured lines: the stage's and the whole's, predicted then carved.
+    assert!(
+        lines.contains(&vec!["adjust", "(stage)", "1000", "993"]),
+        "{out}"
+    );
+    assert!(
+        lines.contains(&vec!["total", "(firmware", "arena)", "1000", "993"]),
+        "{out}"
+    );
+    assert!(!lines.iter().any(|l| l.contains(&"adjust.points")), "{out}");
+}

@@ -1,7 +1,7 @@
 //! `phototraverse budget`: the firmware's memory for a configuration and image size.
 use crate::mcu::{read_elf, section_bytes, Part, Section, StorageSizes, TargetImage, TargetReport};
 use crate::pipeline::PipelineSettings;
-use crate::report::{CapacityLine, RunReport};
+use crate::report::{CapacityLine, MemoryLine, RunReport};
 use anyhow::{Context, Result};
 use phototraverse_core::budget::{ComponentKind, MemoryBudget};
 use phototraverse_core::camera::{Interior, Rig};
@@ -35,9 +35,9 @@ pub struct Args {
     /// and the overflow). Needs the Rust target thumbv7em-none-eabihf.
     #[arg(long)]
     pub part: Option<String>,
-    /// A run's report.json: show what the run measured (the capacities' peaks and, for
-    /// a run on the emulated microcontroller, its sections and stack) beside the
-    /// prediction.
+    /// A run's report.json: show what the run measured (each stage's memory carved by
+    /// the firmware, the capacities' peaks and, for a run on the emulated
+    /// microcontroller, its sections and stack) beside the prediction.
     #[arg(long)]
     pub measured: Option<PathBuf>,
     /// Print JSON instead of a table.
@@ -238,6 +238,8 @@ fn print_image(i: &ImageFit) {
 #[derive(Debug, Serialize)]
 struct Measured {
     report: String,
+    /// Each stage's total and the whole's: predicted by the run, carved by its firmware.
+    memory: Vec<MemoryLine>,
     capacities: Vec<CapacityLine>,
     target: Option<TargetReport>,
 }
@@ -249,6 +251,11 @@ fn read_measured(path: &std::path::Path) -> Result<Measured> {
         .with_context(|| format!("{} is not a run's report.json", path.display()))?;
     Ok(Measured {
         report: path.display().to_string(),
+        memory: r
+            .memory
+            .into_iter()
+            .filter(|l| l.measured_bytes.is_some())
+            .collect(),
         capacities: r.capacities,
         target: r.target,
     })
@@ -256,6 +263,13 @@ fn read_measured(path: &std::path::Path) -> Result<Measured> {
 
 fn print_measured(m: &Measured) {
     println!("\nmeasured by the run {}", m.report);
+    if !m.memory.is_empty() {
+        println!("  {:<22} {:>10} {:>10}", "memory", "predicted", "carved");
+        for l in &m.memory {
+            let carved = l.measured_bytes.map_or("-".into(), |b| b.to_string());
+            println!("  {:<22} {:>10} {:>10}", l.name, l.predicted_bytes, carved);
+        }
+    }
     println!("  {:<22} {:>10} {:>10}", "capacity", "reserved", "peak");
     for c in &m.capacities {
         println!("  {:<22} {:>10} {:>10}", c.name, c.reserved, c.peak);
