@@ -12,7 +12,7 @@
 //! Levenberg-Marquardt damping) on the six parameters over the inliers.
 //! Nothing is allocated: inlier status is recomputed from the pose.
 
-use crate::camera::{project, project_with_jacobians, Pose};
+use crate::camera::{project, project_with_jacobians, rigid_fit, Pose};
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
 /// An object point and its corrected photo-coordinates (mm) in the camera.
@@ -200,27 +200,14 @@ fn poly_roots(c: &[f64], out: &mut [f64; 4]) -> usize {
     n
 }
 
-/// Rotation `M` and centre `C` with `q_i = M (p_i - C)` from three pairs (Kabsch).
+/// Rotation `M` and centre `C` with `q_i = M (p_i - C)` from three pairs: the rigid
+/// fit of the camera-frame points `q` onto the object points `p`, `p = M^T q + C`.
 fn absolute_orientation(
     p: &[Vector3<f64>; 3],
     q: &[Vector3<f64>; 3],
 ) -> Option<(Matrix3<f64>, Vector3<f64>)> {
-    let pc = (p[0] + p[1] + p[2]) / 3.0;
-    let qc = (q[0] + q[1] + q[2]) / 3.0;
-    let mut h = Matrix3::zeros();
-    for i in 0..3 {
-        h += (q[i] - qc) * (p[i] - pc).transpose();
-    }
-    let svd = h.svd(true, true);
-    let (u, vt) = (svd.u?, svd.v_t?);
-    let mut d = Matrix3::identity();
-    if (u * vt).determinant() < 0.0 {
-        d[(2, 2)] = -1.0;
-    }
-    let m = u * d * vt;
-    // q = M p - M C  =>  C = pc - M^T qc
-    let c = pc - m.transpose() * qc;
-    Some((m, c))
+    let back = rigid_fit(q.iter().zip(p).map(|(q, p)| (*q, *p, 1.0)))?;
+    Some((back.r.transpose(), back.t))
 }
 
 /// Grunert's P3P: up to four poses from three correspondences.

@@ -1,6 +1,7 @@
-//! The least-squares rigid motion between two weighted sets of points (Kabsch), as the
-//! matcher's motion check fits its 3-D to 3-D quads: a RANSAC sample and the refit on
-//! the inliers.
+//! The least-squares rigid motion between two weighted sets of points (Kabsch): the one
+//! fit of the matcher's motion check (its 3-D to 3-D quads: a RANSAC sample and the
+//! refit on the inliers) and of the resection's absolute orientation (P3P's camera-frame
+//! points onto the object points).
 use super::proper_rotation;
 use nalgebra::{Matrix3, Vector3};
 
