@@ -70,6 +70,14 @@ impl Stage {
         }
     }
 
+    /// The stage a budget component belongs to, by its name's prefix.
+    pub fn of_component(name: &str) -> Option<Stage> {
+        Stage::ALL.into_iter().find(|s| {
+            name.strip_prefix(s.prefix())
+                .is_some_and(|rest| rest.starts_with('.'))
+        })
+    }
+
     const fn index(self) -> usize {
         self as usize
     }
@@ -223,6 +231,16 @@ impl MemoryBudget {
             .sum()
     }
 
+    /// Total predicted bytes of the components of `stage` ([`Stage::of_component`]):
+    /// what the [`Arena`] should carve for it, less padding it does not need.
+    pub fn total_of_stage(&self, stage: Stage) -> usize {
+        self.components
+            .iter()
+            .filter(|c| Stage::of_component(c.name) == Some(stage))
+            .map(|c| c.bytes)
+            .sum()
+    }
+
     /// Total predicted bytes of the components whose name starts with `prefix`.
     pub fn total_with_prefix(&self, prefix: &str) -> usize {
         self.components
@@ -293,5 +311,10 @@ mod tests {
         assert_eq!(b.total(), 157);
         assert_eq!(b.total_of(ComponentKind::Working), 100);
         assert_eq!(b.total_with_prefix("sift."), 150);
+        assert_eq!(b.total_of_stage(Stage::Sift), 150);
+        assert_eq!(b.total_of_stage(Stage::Firmware), 0);
+        assert_eq!(Stage::of_component("frames"), None);
+        assert_eq!(Stage::of_component("siftx.rings"), None);
+        assert_eq!(Stage::of_component("match.grid"), Some(Stage::Match));
     }
 }

@@ -191,18 +191,25 @@ impl Interior {
     /// determinant. A round trip alone would accept a fold, where Newton finds a root
     /// on the wrong branch.
     fn orientation_preserved(&self, x: f64, y: f64, xc: f64, yc: f64) -> bool {
-        let (j, sign) = match self.distortion_model {
-            DistortionModel::Correction => (
-                self.distortion_jacobian(
-                    x - self.principal_point_mm[0],
-                    y - self.principal_point_mm[1],
-                ),
+        let [[a, b], [c, d]] = match self.distortion_model {
+            DistortionModel::Correction => self.step_jacobian(
+                x - self.principal_point_mm[0],
+                y - self.principal_point_mm[1],
                 -1.0,
             ),
-            DistortionModel::Projection => (self.distortion_jacobian(xc, yc), 1.0),
+            DistortionModel::Projection => self.step_jacobian(xc, yc, 1.0),
         };
-        let det = (1.0 + sign * j[0][0]) * (1.0 + sign * j[1][1]) - j[0][1] * j[1][0];
-        det > 0.0
+        a * d - b * c > 0.0
+    }
+
+    /// The Jacobian `I + sign J_d` of `z + sign d(z)` at `z`: Newton's step matrix of
+    /// [`Self::solve_distorted`], and the map whose determinant tells a fold.
+    fn step_jacobian(&self, zx: f64, zy: f64, sign: f64) -> [[f64; 2]; 2] {
+        let j = self.distortion_jacobian(zx, zy);
+        [
+            [1.0 + sign * j[0][0], sign * j[0][1]],
+            [sign * j[1][0], 1.0 + sign * j[1][1]],
+        ]
     }
 
     fn centre_px(&self) -> [f64; 2] {
@@ -323,9 +330,7 @@ impl Interior {
             let [dx, dy] = self.distortion(zx, zy);
             let fx = zx + sign * dx - tx;
             let fy = zy + sign * dy - ty;
-            let j = self.distortion_jacobian(zx, zy);
-            let (a, b) = (1.0 + sign * j[0][0], sign * j[0][1]);
-            let (c, d) = (sign * j[1][0], 1.0 + sign * j[1][1]);
+            let [[a, b], [c, d]] = self.step_jacobian(zx, zy, sign);
             let det = a * d - b * c;
             // A non-positive determinant is a fold: no root there is the lens's.
             if det.is_nan() || det <= 1e-6 {

@@ -469,12 +469,11 @@ impl<'d> Run<'d> {
         // Each stage's components, then the stage's total beside what its buffers
         // carved when the firmware built them.
         let mut lines = Vec::new();
-        for (stage, carved) in Stage::ALL.iter().zip(self.accepted.carved_bytes) {
-            let prefix = format!("{}.", stage.prefix());
+        for (stage, carved) in Stage::ALL.into_iter().zip(self.accepted.carved_bytes) {
             let own: Vec<&Component> = budget
                 .components()
                 .iter()
-                .filter(|c| c.name.starts_with(&prefix))
+                .filter(|c| Stage::of_component(c.name) == Some(stage))
                 .collect();
             if own.is_empty() && carved == 0 {
                 continue;
@@ -483,16 +482,12 @@ impl<'d> Run<'d> {
             lines.push(MemoryLine {
                 name: format!("{} (stage)", stage.prefix()),
                 kind: "stage".into(),
-                predicted_bytes: budget.total_with_prefix(&prefix),
+                predicted_bytes: budget.total_of_stage(stage),
                 measured_bytes: Some(carved as usize),
             });
         }
-        let staged = |c: &&Component| {
-            Stage::ALL
-                .iter()
-                .any(|s| c.name.starts_with(&format!("{}.", s.prefix())))
-        };
-        lines.extend(budget.components().iter().filter(|c| !staged(c)).map(line));
+        let unstaged = |c: &&Component| Stage::of_component(c.name).is_none();
+        lines.extend(budget.components().iter().filter(unstaged).map(line));
         lines.push(MemoryLine {
             name: "total (firmware arena)".into(),
             kind: "all".into(),

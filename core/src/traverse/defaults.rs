@@ -56,8 +56,10 @@ pub const TRAVERSE_PRIOR_INFLATION: f64 = 1000.0;
 pub const TRAVERSE_VELOCITY_SIGMA: f64 = 2.0;
 
 /// A-priori standard deviation of an image measurement, pixels: the unit of the image
-/// weights, of the robust weighting's thresholds and of the global test. The reduced
-/// SIFT on rendered streets delivers 0.1 to 0.15 px (sigma0 0.2 to 0.3 a posteriori),
-/// so the test reads "below the lower bound"; the value stays because the thresholds
-/// and the constraints' weights were tuned against it (docs/adjustment.md).
+/// weights and of the global test (the robust steps test on the residuals' median
+/// scale instead). The reduced SIFT on rendered streets delivers 0.1 to 0.15 px (sigma0
+/// 0.2 to 0.3 a posteriori), so the test reads "below the lower bound". The value stays:
+/// the reported precision is floored at its a-priori value in these units, which covers
+/// the errors a traverse accumulates, and the constraints' weights were tuned against
+/// it (docs/adjustment.md, Quality).
 pub const TRAVERSE_SIGMA_PX: f64 = 0.5;

@@ -4,7 +4,6 @@ extern crate std;
 use super::*;
 use crate::budget::MemoryBudget;
 use crate::camera::{Interior, Rig};
-use std::format;
 use std::vec;
 use std::vec::Vec;
 
@@ -136,12 +135,11 @@ fn budget_predicts_what_the_traverse_carves() {
     // padding its slices did not need (at most 7 bytes each, here fewer than 20 slices).
     let carved = arena.carved();
     for stage in Stage::ALL {
-        let prefix = format!("{}.", stage.prefix());
-        let predicted = budget.total_with_prefix(&prefix);
+        let predicted = budget.total_of_stage(stage);
         let c = carved[stage as usize];
         assert!(
             c <= predicted && predicted - c < 8 * 20,
-            "{prefix}: carved {c}, predicted {predicted}"
+            "{stage:?}: carved {c}, predicted {predicted}"
         );
     }
     assert_eq!(carved[Stage::Firmware as usize], 0);

@@ -26,15 +26,7 @@ impl<'a> Window<'a> {
 
     /// Standard deviations of slot `i` (omega, phi, kappa rad; X, Y, Z m) from the last solution.
     pub fn epoch_std(&self, i: usize) -> Option<[f64; 6]> {
-        if i >= self.n_epochs || self.epochs[i].flags & EP_COV == 0 {
-            return None;
-        }
-        let c = &self.epochs[i].cov;
-        let mut s = [0.0; 6];
-        for (k, sk) in s.iter_mut().enumerate() {
-            *sk = libm::sqrt(c[k * 6 + k].max(0.0));
-        }
-        Some(s)
+        Some(standard_deviations(&self.epoch_covariance(i)?))
     }
 
     /// 6x6 covariance of slot `i` with respect to the datum (row-major, sigma0^2
