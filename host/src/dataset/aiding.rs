@@ -355,16 +355,17 @@ fn cumulative(readings: &[OdometerReading], t: f64) -> Option<(f64, f64)> {
 mod tests {
     use super::*;
 
-    fn write(name: &str, text: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("pt-aiding-{}-{name}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let p = dir.join(name);
+    /// Writes `text` to `name` in `dir`, which the test owns and removes when it ends.
+    fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> std::path::PathBuf {
+        let p = dir.path().join(name);
         std::fs::write(&p, text).unwrap();
         p
     }
 
     #[test]
     fn reads_fixes_and_names_the_bad_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let write = |name: &str, text: &str| write(&dir, name, text);
         let p = write("gnss.txt", "# t X Y Z s\n0 0 0 0 0.02\n\n0.1 0 1 0 0.02\n");
         let f = read_gnss(&p).unwrap();
         assert_eq!(f.len(), 2);
@@ -414,7 +415,8 @@ mod tests {
         assert!((p[0] + 100.0).abs() < 0.5 && p[1].abs() < 1e-6, "{p:?}");
         assert!((p[2] - 2.0).abs() < 0.01, "{p:?}");
         assert!(GnssSetup::default().to_object(lat, 11.0, 0.0).is_none());
-        let p = write("gnss_geodetic.txt", "0 48 11 500 0.02\n");
+        let dir = tempfile::tempdir().unwrap();
+        let p = write(&dir, "gnss_geodetic.txt", "0 48 11 500 0.02\n");
         let e = read_gnss_geodetic(&p, &GnssSetup::default())
             .unwrap_err()
             .to_string();
