@@ -372,6 +372,16 @@ impl<'a> Matcher<'a> {
         })
     }
 
+    /// Whether left keypoint `i` of the last stereo pass (current epoch) has a right match.
+    pub fn has_stereo_match(&self, i: usize) -> bool {
+        let side = if self.stereo_in_cur {
+            &self.cur
+        } else {
+            &self.prev
+        };
+        i < side.n_left && side.right_of[i] != NONE
+    }
+
     /// One temporal pass (one camera) with the fallback policy.
     fn temporal(
         &mut self,

@@ -21,6 +21,8 @@ pub enum RefineError {
     PeakOnEdge,
     /// Correlating back from the right image does not return to the left point.
     BackCheck,
+    /// Another place along the epipolar line correlates nearly as well (a repeated texture).
+    Ambiguous,
 }
 
 /// [`refine_match`], then the left-right check of [`RefineConfig::back_check_px`].
@@ -334,6 +336,153 @@ fn lane_pass<const L: usize>(
         }
     }
     acc
+}
+
+/// Positions a line search scores at most (whole-pixel steps); a longer segment is cut
+/// at its near end.
+pub const MAX_LINE_STEPS: usize = 512;
+
+/// Steepest epipolar line [`search_line`] follows (rows per column): each chunk of
+/// [`S`] positions is read on one row, which then strays by up to `4 x slope` pixels.
+pub const MAX_LINE_SLOPE: f32 = 0.2;
+
+/// A stretch of an epipolar line in the right image: `steps` positions a whole pixel
+/// apart in x from `start` (the near end, largest disparity), `y` rising by `slope`
+/// per step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LineSegment {
+    pub start: [f32; 2],
+    pub slope: f32,
+    pub steps: usize,
+}
+
+impl LineSegment {
+    /// The row of a rectified pair at disparities `dmin..=dmax` of the left point `left`.
+    pub fn row(left: [f32; 2], (dmin, dmax): (usize, usize)) -> Self {
+        let dmax = dmax.min(dmin + MAX_LINE_STEPS - 1);
+        LineSegment {
+            start: [left[0] - dmax as f32, left[1]],
+            slope: 0.0,
+            steps: (dmax + 1).saturating_sub(dmin),
+        }
+    }
+
+    /// From its near end `near` to its far end `far` (pixels); `None` when the line
+    /// runs the wrong way (the far end left of the near one) or steeper than
+    /// [`MAX_LINE_SLOPE`]. A segment longer than [`MAX_LINE_STEPS`] keeps its far end.
+    pub fn between(near: [f32; 2], far: [f32; 2]) -> Option<Self> {
+        let (dx, dy) = (far[0] - near[0], far[1] - near[1]);
+        if !(dx >= 1.0 && dy.abs() <= MAX_LINE_SLOPE * dx) {
+            return None;
+        }
+        let slope = dy / dx;
+        let steps = (dx as usize + 1).min(MAX_LINE_STEPS);
+        let back = (steps - 1) as f32;
+        Some(LineSegment {
+            start: [far[0] - back, far[1] - back * slope],
+            slope,
+            steps,
+        })
+    }
+
+    fn at(&self, k: usize) -> [f32; 2] {
+        [
+            self.start[0] + k as f32,
+            self.start[1] + k as f32 * self.slope,
+        ]
+    }
+}
+
+/// The NCC scores of the `n x n` template `zt` (zero-mean, squared norm `tnorm`) at the
+/// [`S`] whole-pixel offsets `origin.x + 0 ..= S - 1` of one row of `img` (`origin`: the
+/// top-left corner of the first window, inside the image with a pixel to spare).
+fn row_scores(img: &ImageView<'_>, zt: &[f32], tnorm: f32, n: usize, origin: [f32; 2]) -> [f32; S] {
+    let mut region = [0f32; R * R];
+    sample_region(img, origin, (n + S - 1, n), &mut region);
+    let mut window = [[0f32; 3]; S];
+    window_sums::<S>(&region, zt, n, &mut window);
+    let cnt = (n * n) as f32;
+    window.map(|[sum, sum2, cross]| ncc(sum, sum2, cross, cnt, tnorm))
+}
+
+/// Finds the left template `tpl` (half-size `h`) along the epipolar `line` of the right
+/// image `img`; returns the position of the best score, whole-pixel along the line.
+///
+/// For a left keypoint the descriptors gave no right partner (the detector did not
+/// fire at the same spot in the right image, or the ratio test refused it): the area
+/// alone then decides, so the peak must stand out. It must reach `min_ncc`, and its
+/// NCC distance `sqrt(1 - ncc)` must be below `ratio` times that of the best other
+/// local peak of the line (the descriptors' ratio test, on the correlation), which
+/// refuses a template that repeats along the line (windows of a facade). The position
+/// is whole-pixel: [`refine_checked`] from there gives the sub-pixel one and checks it
+/// back.
+pub fn search_line(
+    tpl: &[f32; TEMPLATE_LEN],
+    h: usize,
+    img: &ImageView<'_>,
+    line: LineSegment,
+    (min_ncc, ratio): (f32, f32),
+) -> Result<[f32; 2], RefineError> {
+    let h = h.min(MAX_REFINE_HALF);
+    let (n, hf) = (2 * h + 1, h as f32);
+    let steps = line.steps.min(MAX_LINE_STEPS);
+    if !(line.start.iter().all(|v| v.is_finite()) && line.slope.abs() <= MAX_LINE_SLOPE) {
+        return Err(RefineError::Border);
+    }
+    let Some((zt, tnorm)) = zero_mean(tpl, n) else {
+        return Err(RefineError::Flat);
+    };
+    // The positions whose chunk windows lie inside the image, with a pixel to spare;
+    // the positions are a straight line, so those form one run.
+    let margin = hf + 1.0 + (S / 2) as f32 * line.slope.abs();
+    let fits = |k: usize| {
+        let [x, y] = line.at(k);
+        inside(img, x, y, margin)
+    };
+    let Some(first) = (0..steps).find(|&k| fits(k)) else {
+        return Err(RefineError::Border);
+    };
+    let last = (first..steps)
+        .take_while(|&k| fits(k))
+        .last()
+        .unwrap_or(first);
+    let count = last - first + 1;
+    if count < S {
+        return Err(RefineError::Border);
+    }
+    // Chunks of S positions, each read on the row of its middle one; the last chunk is
+    // moved back to end at the run's end rather than read past it.
+    let mut score = [f32::MIN; MAX_LINE_STEPS];
+    let mut k = 0;
+    while k < count {
+        let begin = k.min(count - S);
+        let [x, _] = line.at(first + begin);
+        let [_, y] = line.at(first + begin + S / 2);
+        let chunk = row_scores(img, &zt, tnorm, n, [x - hf, y - hf]);
+        score[begin..begin + S].copy_from_slice(&chunk);
+        k = begin + S;
+    }
+    let score = &score[..count];
+    let (best, peak) = score
+        .iter()
+        .copied()
+        .enumerate()
+        .fold((0, f32::MIN), |b, (i, v)| if v > b.1 { (i, v) } else { b });
+    if peak < min_ncc {
+        return Err(RefineError::LowScore);
+    }
+    if best == 0 || best == count - 1 {
+        return Err(RefineError::PeakOnEdge);
+    }
+    let rival = (1..count - 1)
+        .filter(|&i| i != best && score[i] >= score[i - 1] && score[i] >= score[i + 1])
+        .map(|i| score[i])
+        .fold(f32::MIN, f32::max);
+    let distance = |v: f32| libm::sqrtf((1.0 - v).max(0.0));
+    if rival > f32::MIN && distance(peak) >= ratio * distance(rival) {
+        return Err(RefineError::Ambiguous);
+    }
+    Ok(line.at(first + best))
 }
 
 /// Correlates the template `tpl` (half-size `h`, as [`sample_template`] wrote it) with

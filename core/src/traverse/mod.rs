@@ -44,11 +44,12 @@ use crate::camera::{angles_from_rotation, Camera, Pose};
 use crate::features::FeatureSet;
 use crate::image::ImageView;
 use crate::matching::refine::{
-    correlate, magnify_template, recentre, refine_checked, TEMPLATE_LEN,
+    correlate, magnify_template, recentre, refine_checked, sample_template, search_line,
+    LineSegment, TEMPLATE_LEN,
 };
 use crate::matching::{
     relative_motion, Features, MatchError, MatchOutcome as MatchStatus, Matcher, StereoFeatures,
-    TiePoint,
+    StereoGeometry, TiePoint,
 };
 use crate::sift::{Sift, SiftError};
 use area::AreaTie;
@@ -421,7 +422,7 @@ impl<'a> Traverse<'a> {
         }
         // The templates of this image serve the next epoch only if it is in the window.
         let added = self.prev_window_epoch.filter(|&e| Some(e) != before);
-        self.store_patches(fill, left, added);
+        self.store_patches(fill, images, added);
         out.settle(adjusted);
         self.history = [
             self.history[1],

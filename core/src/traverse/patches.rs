@@ -189,6 +189,24 @@ impl<'a> Patches<'a> {
         self.dropped
     }
 
+    /// The first slot [`Patches::push`] may fill: stale or never used.
+    fn free_slot(&mut self) -> Option<usize> {
+        while self.cursor < self.keys.len() && self.cursor < self.n && self.live[self.cursor] != 0 {
+            self.cursor += 1;
+        }
+        (self.cursor < self.keys.len()).then_some(self.cursor)
+    }
+
+    /// Templates carried on or pushed this round.
+    pub fn live(&self) -> usize {
+        self.live[..self.n].iter().filter(|&&l| l != 0).count()
+    }
+
+    /// Whether [`Patches::push`] has a slot left this round.
+    pub fn has_room(&mut self) -> bool {
+        self.free_slot().is_some()
+    }
+
     /// Anchors a new template around `at` in `img` in a free slot, its point `depth`
     /// metres away (`None`: unknown); false when full or at the border.
     pub fn push(
@@ -198,14 +216,10 @@ impl<'a> Patches<'a> {
         info: PatchInfo,
         depth: Option<f32>,
     ) -> bool {
-        while self.cursor < self.keys.len() && self.cursor < self.n && self.live[self.cursor] != 0 {
-            self.cursor += 1;
-        }
-        let slot = self.cursor;
-        if slot >= self.keys.len() {
+        let Some(slot) = self.free_slot() else {
             self.dropped = self.dropped.saturating_add(1);
             return false;
-        }
+        };
         let mut tpl = [0f32; TEMPLATE_LEN];
         if sample_template(img, at, self.half, &mut tpl).is_err() {
             return false;

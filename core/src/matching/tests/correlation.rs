@@ -28,6 +28,34 @@ fn texture(w: usize, h: usize, shift: f64) -> Vec<u8> {
     sines(w, h, shift, &waves)
 }
 
+/// Smoothed pseudo-random grey levels (3 x 3 box over white noise), sampled `shift`
+/// whole pixels (at most 62) to the right: a texture that repeats nowhere.
+fn noise(w: usize, h: usize, shift: usize) -> Vec<u8> {
+    let wide = w + 64;
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let raw: Vec<f64> = (0..wide * (h + 2))
+        .map(|_| {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 56) as f64
+        })
+        .collect();
+    let mut img = vec![0u8; w * h];
+    for r in 0..h {
+        for c in 0..w {
+            let mut v = 0.0;
+            for dr in 0..3 {
+                for dc in 0..3 {
+                    v += raw[(r + dr) * wide + c + shift + dc];
+                }
+            }
+            img[r * w + c] = (v / 9.0).round() as u8;
+        }
+    }
+    img
+}
+
 /// A texture of broad features (a photograph magnified on a near facade).
 fn broad_texture(w: usize, h: usize, shift: f64) -> Vec<u8> {
     let waves = [
@@ -80,6 +108,135 @@ fn ncc_refinement_recovers_subpixel_disparity() {
         refine_match(&li, &ri, [f32::NAN, 30.0], [45.0, 30.0], &cfg),
         Err(refine::RefineError::Border)
     );
+}
+
+#[test]
+fn row_search_finds_the_disparity_and_refuses_a_repeated_texture() {
+    use refine::TEMPLATE_LEN;
+    use refine::{refine_checked, sample_template, search_line, LineSegment, RefineError};
+    let row = |x: f32, range| LineSegment::row([x, 30.0], range);
+    let (w, h) = (240, 60);
+    let left = texture(w, h, 0.0);
+    // right(c) = left(c + 23.6): the match of left x is right x - 23.6.
+    let right = texture(w, h, 23.6);
+    let (li, ri) = (
+        ImageView::new(&left, w, h).unwrap(),
+        ImageView::new(&right, w, h).unwrap(),
+    );
+    let cfg = RefineConfig::default();
+    let accept = (cfg.min_ncc, 0.8);
+    let mut tpl = [0f32; TEMPLATE_LEN];
+    let template = |img: &ImageView, at: [f32; 2], tpl: &mut [f32; TEMPLATE_LEN]| {
+        sample_template(img, at, 4, tpl).unwrap();
+    };
+    for x in [120.0f32, 151.3, 200.8] {
+        template(&li, [x, 30.0], &mut tpl);
+        let guess = search_line(&tpl, 4, &ri, row(x, (0, 100)), accept).unwrap();
+        // Whole-pixel disparity: within half a pixel, and the refinement gets the rest.
+        assert!((guess[0] - (x - 23.6)).abs() <= 0.5, "{guess:?} at {x}");
+        assert_eq!(guess[1], 30.0);
+        let (p, _) = refine_checked(&li, &ri, [x, 30.0], guess, &cfg).unwrap();
+        assert!((p[0] - (x - 23.6)).abs() < 0.08, "{p:?} at {x}");
+    }
+    // A sloping line (a general rig): the match 23.6 px left and 2.36 px up.
+    let waves = |sx: f64, sy: f64| {
+        [
+            (40.0, 0.31, 0.17, 0.0),
+            (35.0, 0.13, -0.29, 1.0),
+            (25.0, 0.53, 0.41, 2.0),
+        ]
+        .map(|(a, fx, fy, ph): (f64, f64, f64, f64)| (a, fx, fy, ph + fx * sx + fy * sy))
+    };
+    let (gl, gr) = (
+        sines(w, h, 0.0, &waves(0.0, 0.0)),
+        sines(w, h, 0.0, &waves(23.6, 2.36)),
+    );
+    let (gli, gri) = (
+        ImageView::new(&gl, w, h).unwrap(),
+        ImageView::new(&gr, w, h).unwrap(),
+    );
+    let free = RefineConfig {
+        rows_only: false,
+        ..cfg
+    };
+    for x in [120.0f32, 151.3] {
+        template(&gli, [x, 30.0], &mut tpl);
+        let line = LineSegment::between([x - 80.0, 22.0], [x, 30.0]).unwrap();
+        assert!(
+            (line.slope - 0.1).abs() < 1e-6 && line.steps == 81,
+            "{line:?}"
+        );
+        let guess = search_line(&tpl, 4, &gri, line, accept).unwrap();
+        assert!((guess[0] - (x - 23.6)).abs() <= 0.5, "{guess:?} at {x}");
+        assert!((guess[1] - 27.64).abs() <= 0.05, "{guess:?} at {x}");
+        // The two-axis refinement is a single fit, without the row's re-centring: up to
+        // 0.35 px across the row on this texture.
+        let (p, _) = refine_checked(&gli, &gri, [x, 30.0], guess, &free).unwrap();
+        assert!(
+            (p[0] - (x - 23.6)).abs() < 0.1 && (p[1] - 27.64).abs() < 0.4,
+            "{p:?}"
+        );
+    }
+    // Lines the search does not follow: too steep, or running from far to near.
+    assert!(LineSegment::between([100.0, 10.0], [150.0, 30.0]).is_none());
+    assert!(LineSegment::between([150.0, 30.0], [100.0, 30.0]).is_none());
+    // On a texture that does not repeat, the true disparity outside the range leaves
+    // no peak that passes.
+    let (nl, nr) = (noise(w, h, 0), noise(w, h, 23));
+    let (nli, nri) = (
+        ImageView::new(&nl, w, h).unwrap(),
+        ImageView::new(&nr, w, h).unwrap(),
+    );
+    for x in [120.0f32, 150.0, 200.0] {
+        template(&nli, [x, 30.0], &mut tpl);
+        let found = search_line(&tpl, 4, &nri, row(x, (0, 100)), accept).unwrap();
+        assert!((found[0] - (x - 23.0)).abs() < 0.01, "{found:?} at {x}");
+        let r = search_line(&tpl, 4, &nri, row(x, (30, 100)), accept);
+        assert!(r.is_err(), "{r:?} at {x}");
+    }
+    // Too near the left border for the range to hold a chunk of positions.
+    template(&li, [12.0, 30.0], &mut tpl);
+    assert_eq!(
+        search_line(&tpl, 4, &ri, row(12.0, (0, 100)), accept),
+        Err(RefineError::Border)
+    );
+    // Stripes that repeat every 12 pixels along the row: every period correlates alike.
+    let stripes = |shift| {
+        sines(
+            w,
+            h,
+            shift,
+            &[(60.0, 2.0 * core::f64::consts::PI / 12.0, 0.05, 0.0)],
+        )
+    };
+    let (sl, sr) = (stripes(0.0), stripes(23.6));
+    let (sli, sri) = (
+        ImageView::new(&sl, w, h).unwrap(),
+        ImageView::new(&sr, w, h).unwrap(),
+    );
+    template(&sli, [150.0, 30.0], &mut tpl);
+    assert_eq!(
+        search_line(&tpl, 4, &sri, row(150.0, (0, 100)), accept),
+        Err(RefineError::Ambiguous)
+    );
+    // A flat template, and one that appears nowhere in the right image.
+    let flat = vec![90u8; w * h];
+    template(
+        &ImageView::new(&flat, w, h).unwrap(),
+        [150.0, 30.0],
+        &mut tpl,
+    );
+    assert_eq!(
+        search_line(&tpl, 4, &ri, row(150.0, (0, 100)), accept),
+        Err(RefineError::Flat)
+    );
+    let other = broad_texture(w, h, 0.0);
+    template(
+        &ImageView::new(&other, w, h).unwrap(),
+        [150.0, 30.0],
+        &mut tpl,
+    );
+    assert!(search_line(&tpl, 4, &ri, row(150.0, (0, 100)), (0.95, 0.8)).is_err());
 }
 
 #[test]
