@@ -17,7 +17,6 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-pub(crate) mod intersection;
 mod rigid;
 pub(crate) use rigid::{rigid_fit, RigidMotion};
 

@@ -8,10 +8,9 @@
 //! epoch's left centre when the window is created) so sums of squares never
 //! mix kilometres with millimetres.
 //!
-//! - [`intersect`] (the rays' linear intersection, in `camera` because the matcher
-//!   triangulates with it too) is re-exported here.
 //! - [`geometry`]: collinearity of the left and right cameras of the rig with
 //!   analytic Jacobians (chain rule through the relative orientation).
+//! - `intersection`: linear intersection of two or more rays (seed 000, §5.4).
 //! - `resection`: P3P (Grunert) in a deterministic RANSAC, then least squares.
 //! - `cholesky`: in-place Cholesky factorisation, solve and inverse.
 //! - `constraints`: datum/prior, base length, relative orientation prior,
@@ -36,6 +35,7 @@
 pub(crate) mod cholesky;
 pub(crate) mod constraints;
 pub mod geometry;
+pub(crate) mod intersection;
 pub(crate) mod propagation;
 pub mod quality;
 pub(crate) mod resection;
@@ -47,8 +47,8 @@ mod bias_tests;
 #[cfg(test)]
 mod tests;
 
-pub use crate::camera::intersection::{intersect, IntersectError, Intersection, Ray};
 pub use geometry::InteriorCorrections;
+pub use intersection::{intersect, IntersectError, Intersection, Ray};
 pub use propagation::{right_camera_covariance, standard_deviations};
 pub use resection::{resect, Correspondence, ResectionConfig, ResectionError, ResectionResult};
 pub use window::{

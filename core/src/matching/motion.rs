@@ -8,7 +8,7 @@
 //! images within `threshold_px` of its observations. Image-space residuals keep far
 //! points, whose depth is poor but whose reprojection is still exact, in the test.
 
-use crate::camera::{rigid_fit, Pose, Rig, RigidMotion};
+use crate::camera::{rigid_fit, Rig, RigidMotion};
 use nalgebra::{Matrix3, Vector3};
 
 /// Parameters of the check.
@@ -67,16 +67,15 @@ fn residual(
     el.max(er)
 }
 
-/// Triangulation from corrected coordinates (left camera frame, `poses`:
-/// `predict::stereo_poses`).
+/// Midpoint triangulation from corrected coordinates (left camera frame).
 fn triangulate_corrected(
     rig: &Rig,
-    poses: &[Pose; 2],
+    mrel: &Matrix3<f64>,
     l: [f32; 2],
     r: [f32; 2],
 ) -> Option<Vector3<f64>> {
     let f64s = |p: [f32; 2]| [p[0] as f64, p[1] as f64];
-    super::predict::triangulate_corrected(rig, poses, f64s(l), f64s(r))
+    super::predict::triangulate_corrected(rig, mrel, f64s(l), f64s(r))
 }
 
 /// Converts pixel observations to corrected photo-coordinates (mm), in place.
@@ -105,12 +104,11 @@ pub fn check_motion(
     let n = obs.len().min(pts.len() / 2).min(inlier.len());
     inlier[..n].fill(1);
     let mrel = rig.relative_rotation();
-    let poses = super::predict::stereo_poses(rig);
     // Triangulate; a quad that does not triangulate in both epochs is an outlier.
     let mut usable = 0;
     for i in 0..n {
         let o = &obs[i];
-        let tri = |l: [f32; 2], r: [f32; 2]| triangulate_corrected(rig, &poses, l, r);
+        let tri = |l: [f32; 2], r: [f32; 2]| triangulate_corrected(rig, &mrel, l, r);
         match (tri(o[0], o[1]), tri(o[2], o[3])) {
             (Some(p), Some(q)) => {
                 pts[2 * i] = [p[0], p[1], p[2]];

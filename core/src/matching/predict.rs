@@ -7,7 +7,6 @@
 //! camera's pose in that frame; [`relative_motion`] builds it from two object-frame poses.
 
 use super::config::NONE;
-use crate::camera::intersection::{intersect, Ray};
 use crate::camera::{Interior, Pose, Rig, MIN_DEPTH};
 use crate::features::Keypoint;
 use nalgebra::{Matrix3, Vector3};
@@ -20,54 +19,49 @@ pub fn relative_motion(prev: &Pose, cur: &Pose) -> Pose {
     Pose::from_rotation(&m, [c[0], c[1], c[2]])
 }
 
-/// Triangulation of a stereo match in the left camera frame (metres);
+/// Midpoint triangulation of a stereo match in the left camera frame (metres);
 /// `None` when the rays are parallel or the point is not in front of both cameras.
 pub fn triangulate(rig: &Rig, left_px: [f64; 2], right_px: [f64; 2]) -> Option<Vector3<f64>> {
-    triangulate_with(rig, &stereo_poses(rig), left_px, right_px)
+    triangulate_with(rig, &rig.relative_rotation(), left_px, right_px)
 }
 
-/// The left camera (identity) and the right camera in the left camera's frame.
-pub(crate) fn stereo_poses(rig: &Rig) -> [Pose; 2] {
-    let left = Pose::default();
-    [left, rig.right_pose(&left)]
-}
-
-/// [`triangulate`] with the [`stereo_poses`] computed once by the caller.
+/// [`triangulate`] with the relative rotation computed once by the caller.
 fn triangulate_with(
     rig: &Rig,
-    poses: &[Pose; 2],
+    mrel: &Matrix3<f64>,
     left_px: [f64; 2],
     right_px: [f64; 2],
 ) -> Option<Vector3<f64>> {
     let l = rig.left.pixel_to_corrected(left_px[0], left_px[1]);
     let r = rig.right.pixel_to_corrected(right_px[0], right_px[1]);
-    triangulate_corrected(rig, poses, l, r)
+    triangulate_corrected(rig, mrel, l, r)
 }
 
-/// Triangulation from corrected photo-coordinates (mm) in the left camera frame
-/// (`poses`: [`stereo_poses`]), by the one intersection of rays ([`intersect`]).
+/// Midpoint triangulation from corrected photo-coordinates (mm) in the left camera
+/// frame; `mrel` is the rig's relative rotation.
 pub fn triangulate_corrected(
     rig: &Rig,
-    poses: &[Pose; 2],
-    l: [f64; 2],
-    r: [f64; 2],
+    mrel: &Matrix3<f64>,
+    [xl, yl]: [f64; 2],
+    [xr, yr]: [f64; 2],
 ) -> Option<Vector3<f64>> {
-    let rays = [
-        Ray {
-            pose: poses[0],
-            focal_mm: rig.left.focal_mm,
-            xy: l,
-        },
-        Ray {
-            pose: poses[1],
-            focal_mm: rig.right.focal_mm,
-            xy: r,
-        },
-    ];
-    // Any angle: a far point weighs little in the motion check (1 / Z^2) and predicts
-    // where its direction does.
-    let x = intersect(&rays, 0.0).ok()?;
-    Some(Vector3::from(x.point))
+    let dl = Vector3::new(xl, yl, -rig.left.focal_mm);
+    let dr = mrel.transpose() * Vector3::new(xr, yr, -rig.right.focal_mm);
+    let b = Vector3::from(rig.base_m);
+    // Closest points of 0 + s dl and b + u dr.
+    let (a11, a12, a22) = (dl.dot(&dl), -dl.dot(&dr), dr.dot(&dr));
+    let (r1, r2) = (dl.dot(&b), -dr.dot(&b));
+    let det = a11 * a22 - a12 * a12;
+    if det.is_nan() || det.abs() <= 1e-12 * a11 * a22 {
+        return None;
+    }
+    let s = (r1 * a22 - a12 * r2) / det;
+    let u = (a11 * r2 - a12 * r1) / det;
+    if !(s > 0.0 && u > 0.0) {
+        return None;
+    }
+    let p = (dl * s + b + dr * u) * 0.5;
+    p.iter().all(|v| v.is_finite()).then_some(p)
 }
 
 /// Fills `out_left[i]` (per previous left keypoint) and `out_right[j]` (per previous
@@ -86,7 +80,7 @@ pub fn predict_positions(
     out_left.fill([f32::NAN; 2]);
     out_right.fill([f32::NAN; 2]);
     // Rotations once per call: the per-point work is then a few multiply-adds.
-    let poses = stereo_poses(rig);
+    let mrel = rig.relative_rotation();
     let left_cam = Projector::new(motion, &rig.left);
     let right_cam = Projector::new(&rig.right_pose(motion), &rig.right);
     let mut count = 0;
@@ -99,7 +93,7 @@ pub fn predict_positions(
         };
         let Some(p) = triangulate_with(
             rig,
-            &poses,
+            &mrel,
             [kl.x as f64, kl.y as f64],
             [kr.x as f64, kr.y as f64],
         ) else {

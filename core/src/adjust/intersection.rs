@@ -1,6 +1,4 @@
-//! Linear intersection of two or more rays, seed 000 §5.4 ("MIFL"): the one
-//! triangulation of the code base (a stereo pair's point for the matcher's predictions
-//! and motion check, a new tie point for the window, a block's points for `adjust`).
+//! Linear intersection of two or more rays, seed 000 §5.4 ("MIFL").
 //!
 //! Each ray (pose, focal length, corrected photo-coordinates) gives two linear
 //! equations in the object point by clearing the collinearity denominators
@@ -11,11 +9,7 @@
 //! camera, and the largest angle between two rays must exceed a minimum
 //! (a point at infinity or a zero base gives parallel rays).
 
-// `!(x >= y)` is deliberate: it is also true for NaN, so a non-finite angle or depth
-// refuses the point.
-#![allow(clippy::neg_cmp_op_on_partial_ord)]
-
-use super::{Pose, MIN_DEPTH};
+use crate::camera::Pose;
 use nalgebra::{Matrix3, Vector3};
 
 /// One image ray: the camera's pose, its focal length and the corrected photo-coordinates.
@@ -116,7 +110,7 @@ pub fn intersect(rays: &[Ray], min_angle_rad: f64) -> Result<Intersection, Inter
     }
     let point = [p[0], p[1], p[2]];
     for ray in rays {
-        if !(ray.pose.to_camera(&point)[2] < -MIN_DEPTH) {
+        if !(ray.pose.to_camera(&point)[2] < -crate::camera::MIN_DEPTH) {
             return Err(IntersectError::BehindCamera);
         }
     }
