@@ -338,8 +338,8 @@ fn lane_pass<const L: usize>(
     acc
 }
 
-/// Positions a line search scores at most (whole-pixel steps); a longer segment is cut
-/// at its near end.
+/// Positions a line search scores at most (whole-pixel steps): [`LineSegment`] cuts a
+/// longer one at its near end, where points are fewest.
 pub const MAX_LINE_STEPS: usize = 512;
 
 /// Steepest epipolar line [`search_line`] follows (rows per column): each chunk of
@@ -359,24 +359,25 @@ pub struct LineSegment {
 impl LineSegment {
     /// The row of a rectified pair at disparities `dmin..=dmax` of the left point `left`.
     pub fn row(left: [f32; 2], (dmin, dmax): (usize, usize)) -> Self {
-        let dmax = dmax.min(dmin + MAX_LINE_STEPS - 1);
+        let dmax = dmax.min(dmin.saturating_add(MAX_LINE_STEPS - 1));
         LineSegment {
             start: [left[0] - dmax as f32, left[1]],
             slope: 0.0,
-            steps: (dmax + 1).saturating_sub(dmin),
+            steps: dmax.checked_sub(dmin).map_or(0, |n| n + 1),
         }
     }
 
-    /// From its near end `near` to its far end `far` (pixels); `None` when the line
-    /// runs the wrong way (the far end left of the near one) or steeper than
+    /// From its near end `near` to its far end `far` (pixels); `None` when an end is not
+    /// finite, the line runs the wrong way (the far end left of the near one: a right
+    /// camera that is not to the right of the left one) or is steeper than
     /// [`MAX_LINE_SLOPE`]. A segment longer than [`MAX_LINE_STEPS`] keeps its far end.
     pub fn between(near: [f32; 2], far: [f32; 2]) -> Option<Self> {
         let (dx, dy) = (far[0] - near[0], far[1] - near[1]);
-        if !(dx >= 1.0 && dy.abs() <= MAX_LINE_SLOPE * dx) {
+        if !(dx.is_finite() && dx >= 1.0 && dy.abs() <= MAX_LINE_SLOPE * dx) {
             return None;
         }
         let slope = dy / dx;
-        let steps = (dx as usize + 1).min(MAX_LINE_STEPS);
+        let steps = dx.min((MAX_LINE_STEPS - 1) as f32) as usize + 1;
         let back = (steps - 1) as f32;
         Some(LineSegment {
             start: [far[0] - back, far[1] - back * slope],
@@ -478,7 +479,8 @@ pub fn search_line(
         .filter(|&i| i != best && score[i] >= score[i - 1] && score[i] >= score[i + 1])
         .map(|i| score[i])
         .fold(f32::MIN, f32::max);
-    let distance = |v: f32| libm::sqrtf((1.0 - v).max(0.0));
+    // Floored so that a perfect peak still loses to a perfect repeat.
+    let distance = |v: f32| libm::sqrtf((1.0 - v).max(1e-4));
     if rival > f32::MIN && distance(peak) >= ratio * distance(rival) {
         return Err(RefineError::Ambiguous);
     }

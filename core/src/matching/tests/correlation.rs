@@ -129,14 +129,25 @@ fn row_search_finds_the_disparity_and_refuses_a_repeated_texture() {
     let template = |img: &ImageView, at: [f32; 2], tpl: &mut [f32; TEMPLATE_LEN]| {
         sample_template(img, at, 4, tpl).unwrap();
     };
-    for x in [120.0f32, 151.3, 200.8] {
+    // Whole runs; one that starts past the image's left edge (its first 45 positions
+    // cut); one whose match lies in the last chunk, moved back to end the run; one near
+    // the right edge (as near as the refinement's back check allows).
+    for (x, range) in [
+        (120.0f32, (0, 100)),
+        (151.3, (0, 100)),
+        (200.8, (0, 100)),
+        (60.0, (0, 100)),
+        (120.0, (20, 60)),
+        (228.0, (0, 100)),
+    ] {
         template(&li, [x, 30.0], &mut tpl);
-        let guess = search_line(&tpl, 4, &ri, row(x, (0, 100)), accept).unwrap();
+        let guess = search_line(&tpl, 4, &ri, row(x, range), accept).unwrap();
         // Whole-pixel disparity: within half a pixel, and the refinement gets the rest.
         assert!((guess[0] - (x - 23.6)).abs() <= 0.5, "{guess:?} at {x}");
         assert_eq!(guess[1], 30.0);
+        // The refinement's own error on this texture reaches 0.1 px at x = 60.
         let (p, _) = refine_checked(&li, &ri, [x, 30.0], guess, &cfg).unwrap();
-        assert!((p[0] - (x - 23.6)).abs() < 0.08, "{p:?} at {x}");
+        assert!((p[0] - (x - 23.6)).abs() < 0.12, "{p:?} at {x}");
     }
     // A sloping line (a general rig): the match 23.6 px left and 2.36 px up.
     let waves = |sx: f64, sy: f64| {
@@ -193,7 +204,24 @@ fn row_search_finds_the_disparity_and_refuses_a_repeated_texture() {
         assert!((found[0] - (x - 23.0)).abs() < 0.01, "{found:?} at {x}");
         let r = search_line(&tpl, 4, &nri, row(x, (30, 100)), accept);
         assert!(r.is_err(), "{r:?} at {x}");
+        // The match at the range's end: it may lie beyond it.
+        let r = search_line(&tpl, 4, &nri, row(x, (23, 100)), accept);
+        assert_eq!(r, Err(RefineError::PeakOnEdge), "at {x}");
     }
+    // A segment longer than the search keeps its far end; ends that are not finite
+    // give none.
+    let long = LineSegment::between([-5000.0, 30.0], [150.0, 30.0]).unwrap();
+    assert_eq!(long.steps, refine::MAX_LINE_STEPS);
+    assert_eq!(
+        long.start,
+        [150.0 - (refine::MAX_LINE_STEPS - 1) as f32, 30.0]
+    );
+    assert!(LineSegment::between([f32::NEG_INFINITY, 30.0], [150.0, 30.0]).is_none());
+    assert!(LineSegment::between([10.0, 30.0], [f32::NAN, 30.0]).is_none());
+    assert_eq!(
+        LineSegment::row([150.0, 30.0], (usize::MAX, usize::MAX)).steps,
+        1
+    );
     // Too near the left border for the range to hold a chunk of positions.
     template(&li, [12.0, 30.0], &mut tpl);
     assert_eq!(
