@@ -2,6 +2,11 @@
 //! recentred templates.
 use super::*;
 
+/// A grey image of `w x h` as a view (the tests' images are valid by construction).
+fn view(img: &[u8], w: usize, h: usize) -> ImageView<'_> {
+    ImageView::new(img, w, h).unwrap()
+}
+
 /// A sum of sines `(amplitude, x frequency, y frequency, phase)` around grey 128,
 /// sampled at a horizontal shift.
 fn sines(w: usize, h: usize, shift: f64, waves: &[(f64, f64, f64, f64)]) -> Vec<u8> {
@@ -72,10 +77,7 @@ fn ncc_refinement_recovers_subpixel_disparity() {
     let left = texture(w, h, 0.0);
     // right(c) = left(c + 10.37): the match of left x is right x - 10.37.
     let right = texture(w, h, 10.37);
-    let (li, ri) = (
-        ImageView::new(&left, w, h).unwrap(),
-        ImageView::new(&right, w, h).unwrap(),
-    );
+    let (li, ri) = (view(&left, w, h), view(&right, w, h));
     let cfg = RefineConfig {
         min_ncc: 0.9,
         ..Default::default()
@@ -94,7 +96,7 @@ fn ncc_refinement_recovers_subpixel_disparity() {
     }
     // Flat image, border, peak beyond the search radius.
     let flat = vec![100u8; w * h];
-    let fi = ImageView::new(&flat, w, h).unwrap();
+    let fi = view(&flat, w, h);
     assert_eq!(
         refine_match(&fi, &ri, [50.0, 30.0], [40.0, 30.0], &cfg),
         Err(refine::RefineError::Flat)
@@ -119,10 +121,7 @@ fn row_search_finds_the_disparity_and_refuses_a_repeated_texture() {
     let left = texture(w, h, 0.0);
     // right(c) = left(c + 23.6): the match of left x is right x - 23.6.
     let right = texture(w, h, 23.6);
-    let (li, ri) = (
-        ImageView::new(&left, w, h).unwrap(),
-        ImageView::new(&right, w, h).unwrap(),
-    );
+    let (li, ri) = (view(&left, w, h), view(&right, w, h));
     let cfg = RefineConfig::default();
     let accept = (cfg.min_ncc, 0.8);
     let mut tpl = [0f32; TEMPLATE_LEN];
@@ -162,10 +161,7 @@ fn row_search_finds_the_disparity_and_refuses_a_repeated_texture() {
         sines(w, h, 0.0, &waves(0.0, 0.0)),
         sines(w, h, 0.0, &waves(23.6, 2.36)),
     );
-    let (gli, gri) = (
-        ImageView::new(&gl, w, h).unwrap(),
-        ImageView::new(&gr, w, h).unwrap(),
-    );
+    let (gli, gri) = (view(&gl, w, h), view(&gr, w, h));
     let free = RefineConfig {
         rows_only: false,
         ..cfg
@@ -194,10 +190,7 @@ fn row_search_finds_the_disparity_and_refuses_a_repeated_texture() {
     // On a texture that does not repeat, the true disparity outside the range leaves
     // no peak that passes.
     let (nl, nr) = (noise(w, h, 0), noise(w, h, 23));
-    let (nli, nri) = (
-        ImageView::new(&nl, w, h).unwrap(),
-        ImageView::new(&nr, w, h).unwrap(),
-    );
+    let (nli, nri) = (view(&nl, w, h), view(&nr, w, h));
     for x in [120.0f32, 150.0, 200.0] {
         template(&nli, [x, 30.0], &mut tpl);
         let found = search_line(&tpl, 4, &nri, row(x, (0, 100)), accept).unwrap();
@@ -238,10 +231,7 @@ fn row_search_finds_the_disparity_and_refuses_a_repeated_texture() {
         )
     };
     let (sl, sr) = (stripes(0.0), stripes(23.6));
-    let (sli, sri) = (
-        ImageView::new(&sl, w, h).unwrap(),
-        ImageView::new(&sr, w, h).unwrap(),
-    );
+    let (sli, sri) = (view(&sl, w, h), view(&sr, w, h));
     template(&sli, [150.0, 30.0], &mut tpl);
     assert_eq!(
         search_line(&tpl, 4, &sri, row(150.0, (0, 100)), accept),
@@ -249,21 +239,13 @@ fn row_search_finds_the_disparity_and_refuses_a_repeated_texture() {
     );
     // A flat template, and one that appears nowhere in the right image.
     let flat = vec![90u8; w * h];
-    template(
-        &ImageView::new(&flat, w, h).unwrap(),
-        [150.0, 30.0],
-        &mut tpl,
-    );
+    template(&view(&flat, w, h), [150.0, 30.0], &mut tpl);
     assert_eq!(
         search_line(&tpl, 4, &ri, row(150.0, (0, 100)), accept),
         Err(RefineError::Flat)
     );
     let other = broad_texture(w, h, 0.0);
-    template(
-        &ImageView::new(&other, w, h).unwrap(),
-        [150.0, 30.0],
-        &mut tpl,
-    );
+    template(&view(&other, w, h), [150.0, 30.0], &mut tpl);
     assert!(search_line(&tpl, 4, &ri, row(150.0, (0, 100)), (0.95, 0.8)).is_err());
 }
 
@@ -353,10 +335,7 @@ fn a_recentred_correlation_does_not_lean_towards_its_start() {
     let left = broad_texture(w, h, 0.0);
     // right(c) = left(c + 10.37): left x = 60 is at right x = 49.63.
     let right = broad_texture(w, h, 10.37);
-    let (li, ri) = (
-        ImageView::new(&left, w, h).unwrap(),
-        ImageView::new(&right, w, h).unwrap(),
-    );
+    let (li, ri) = (view(&left, w, h), view(&right, w, h));
     let mut tpl = [0f32; refine::TEMPLATE_LEN];
     refine::sample_template(&li, [60.0, 30.0], 4, &mut tpl).unwrap();
     // The same match searched from starts a fraction of a pixel either side of it.
