@@ -131,7 +131,7 @@ impl Traverse<'_> {
     /// Why: where the detector does not fire at the same spot in both images (sensor
     /// noise, the right camera's other view of a surface), most left keypoints of a
     /// weak image have no right keypoint to pair with; at 320x240 a noisy street kept
-    /// 10 to 18 tie points per epoch. Only up to [`LINE_SEARCH_UNTIL`] templates: the
+    /// about 14 tie points per epoch. Only up to [`LINE_SEARCH_UNTIL`] templates: the
     /// search is the dearest correlation of the epoch (a few hundred positions per
     /// keypoint), and a strong image gains nothing from it.
     fn store_line_matches(&mut self, fill: usize, (left, right): (&ImageView, &ImageView)) {
@@ -168,10 +168,11 @@ impl Traverse<'_> {
 }
 
 /// Templates past which no epipolar search is made ([`Traverse::store_line_matches`]).
-/// Measured on rendered streets: at 320x240 (a realistic `curves`, 14 to 18 tie points
-/// per epoch) the searched matches doubled the tie points and halved the drift on four
-/// of six draws; at 640x480 on `traffic` (about 150 tie points) they added half as many
-/// again, left the drift as it was and cost a quarter more time per epoch.
+/// Measured on rendered streets: at 320x240 (a realistic `curves`, a median of 14 to 21
+/// tie points per epoch on five of six draws) the searched matches added half as many
+/// again or doubled them, and the drift fell to a half or less on three draws and by a
+/// third on a fourth; at 640x480 on `traffic` (about 150 tie points) they added half as
+/// many again, left the drift as it was and cost a fifth to a half more time per epoch.
 const LINE_SEARCH_UNTIL: usize = 96;
 
 /// Nearest depth (metres) an epipolar search reaches on a general rig.
