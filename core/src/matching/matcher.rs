@@ -355,11 +355,7 @@ impl<'a> Matcher<'a> {
         &'s self,
         left: &'s [crate::features::Keypoint],
     ) -> impl Iterator<Item = StereoMatch> + 's {
-        let cur = if self.stereo_in_cur {
-            &self.cur
-        } else {
-            &self.prev
-        };
+        let cur = self.last_stereo();
         (0..cur.n_left.min(left.len())).filter_map(move |i| {
             let j = cur.right_of[i];
             (j != NONE).then(|| StereoMatch {
@@ -374,12 +370,18 @@ impl<'a> Matcher<'a> {
 
     /// Whether left keypoint `i` of the last stereo pass (current epoch) has a right match.
     pub fn has_stereo_match(&self, i: usize) -> bool {
-        let side = if self.stereo_in_cur {
+        let side = self.last_stereo();
+        i < side.n_left && side.right_of[i] != NONE
+    }
+
+    /// The buffers of the last stereo pass: `cur` until `accept_epoch` swaps them into
+    /// `prev`.
+    fn last_stereo(&self) -> &StereoSide<'a> {
+        if self.stereo_in_cur {
             &self.cur
         } else {
             &self.prev
-        };
-        i < side.n_left && side.right_of[i] != NONE
+        }
     }
 
     /// One temporal pass (one camera) with the fallback policy.
