@@ -246,6 +246,14 @@ impl<'b> Link<'b> {
                     Flow::Continue
                 }
                 Some(Event::Message { .. }) => {
+                    if !is_bulk(&self.ep) {
+                        // It may start long work (the epoch, once its frames are
+                        // complete): acknowledged after the work, it would run out the
+                        // peer's retransmission timer, and every epoch would cost a
+                        // resent packet and a duplicate.
+                        self.ep.acknowledge();
+                        self.transmit(port, now)?;
+                    }
                     let Endpoint { rx, tx, .. } = &mut self.ep;
                     let mut tx = Tx { ep: tx, clock };
                     match rx.message() {
@@ -271,5 +279,122 @@ impl<'b> Link<'b> {
             // Acknowledgements and resends that came due while handling.
             self.transmit(port, now)?;
         }
+    }
+}
+
+/// Whether the message ready in `ep` is frame data, which arrives in bursts
+/// and is acknowledged in batches (`ack_every`, or when the port runs dry).
+fn is_bulk<B: AsMut<[u8]> + AsRef<[u8]>>(ep: &Endpoint<B>) -> bool {
+    matches!(ep.rx.message(), Some((_, Ok(Message::FrameChunk(_)))))
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use super::*;
+    use phototraverse_core::protocol::messages::{Camera, FrameChunk, FrameEnd};
+    use phototraverse_core::protocol::MAX_PACKET;
+    use phototraverse_core::traverse::NoClock;
+    use std::boxed::Box;
+    use std::vec;
+    use std::vec::Vec;
+
+    /// A port that reads given bytes, then reports the end of input, and keeps
+    /// what is written.
+    struct Port {
+        input: Vec<u8>,
+        pos: usize,
+        out: Vec<u8>,
+    }
+
+    impl embedded_io::ErrorType for Port {
+        type Error = core::convert::Infallible;
+    }
+
+    impl Read for Port {
+        fn read(&mut self, buf: &mut [u8]) -> Result<usize, Self::Error> {
+            let n = buf.len().min(self.input.len() - self.pos);
+            buf[..n].copy_from_slice(&self.input[self.pos..self.pos + n]);
+            self.pos += n;
+            Ok(n)
+        }
+    }
+
+    impl Write for Port {
+        fn write(&mut self, buf: &[u8]) -> Result<usize, Self::Error> {
+            self.out.extend_from_slice(buf);
+            Ok(buf.len())
+        }
+        fn flush(&mut self) -> Result<(), Self::Error> {
+            Ok(())
+        }
+    }
+
+    /// The host's end, with room for a frame's worth of packets in flight.
+    fn host() -> Endpoint<Vec<u8>> {
+        Endpoint::new(
+            EndpointBuffers {
+                decode: vec![0; MAX_ENCODED],
+                reorder: vec![0; 4 * MAX_PACKET],
+                reorder_slot: MAX_PACKET,
+                window: vec![0; 16 * MAX_ENCODED],
+                window_slot: MAX_ENCODED,
+                raw: vec![0; MAX_PACKET],
+            },
+            EndpointConfig::default(),
+        )
+    }
+
+    /// The firmware's handler sees a burst of frame chunks and the frame's end; it
+    /// records, for each message, how many of the host's packets were still
+    /// unacknowledged when the message reached it (its work would start there).
+    fn unacknowledged_at_each_message(messages: &[Message]) -> Vec<usize> {
+        let mut host = host();
+        let mut wire = Vec::new();
+        for m in messages {
+            host.tx.send(m).expect("room in the host's window");
+            while let Some(bytes) = host.poll_transmit(0) {
+                wire.extend_from_slice(bytes);
+            }
+        }
+        let mut port = Port {
+            input: wire,
+            pos: 0,
+            out: Vec::new(),
+        };
+        let mut buffers = Box::new(LinkBuffers::new());
+        let mut link = Link::new(&mut buffers);
+        let mut seen = Vec::new();
+        let served = link.serve(&mut port, &NoClock, |_, port, _, _| {
+            let (n, _) = host.receive(0, &port.out);
+            port.out.drain(..n);
+            seen.push(host.tx.in_flight());
+            Ok(Flow::<()>::Continue)
+        });
+        assert!(matches!(served, Ok(Served::Eof)));
+        seen
+    }
+
+    #[test]
+    fn the_end_of_a_frame_is_acknowledged_before_the_work_it_starts() {
+        let data = [7u8; 64];
+        let chunk = |offset| {
+            Message::FrameChunk(FrameChunk {
+                epoch: 3,
+                camera: Camera::Right,
+                offset,
+                data: &data,
+            })
+        };
+        let end = Message::FrameEnd(FrameEnd {
+            epoch: 3,
+            camera: Camera::Right,
+            total_bytes: 192,
+            crc32: 0,
+        });
+        let seen = unacknowledged_at_each_message(&[chunk(0), chunk(64), chunk(128), end]);
+        // The chunks go on unacknowledged (acknowledgements come in batches); when
+        // the frame's end reaches the application, the host has its acknowledgement.
+        assert_eq!(seen, [4, 4, 4, 0]);
     }
 }

@@ -6,9 +6,9 @@
 use crate::link::{FaultCounters, LinkOptions, Transport};
 use phototraverse_core::protocol::crc::crc32;
 use phototraverse_core::protocol::messages::{
-    Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult, ErrorCode, FrameBegin,
-    FrameChunk, FrameEnd, Hello, Message, MessageType, PixelFormat, Points, PointsRequest, Reset,
-    ResultStatus, Stats, CHUNK_HEADER_LEN,
+    stage, Aux, Camera, Capabilities, ConfigAccepted, Configure, EpochResult, ErrorCode,
+    FrameBegin, FrameChunk, FrameEnd, Hello, Message, MessageType, PixelFormat, Points,
+    PointsRequest, Reset, ResultStatus, Stats, CHUNK_HEADER_LEN,
 };
 use phototraverse_core::protocol::{
     wire_len, Endpoint, EndpointBuffers, EndpointConfig, Event, SendError, MAX_ENCODED, MAX_PACKET,
@@ -856,14 +856,24 @@ impl<T: Transport> Session<T> {
             }
             let silent = self.last_heard.elapsed();
             self.check_silence(silent, what)?;
-            let rto = Duration::from_micros(self.ep.tx.rto_us());
-            if silent > rto && self.last_nudge.elapsed() > rto {
+            let patience = self.answer_patience();
+            if silent > patience && self.last_nudge.elapsed() > patience {
                 // An answer of the firmware may be lost and the firmware has no
                 // reason to look at its timers: ask it to resend now.
                 self.last_nudge = Instant::now();
                 self.ep.nudge();
             }
         }
+    }
+
+    /// How long the firmware may be silent before the host asks it to resend: a
+    /// retransmission time-out, or twice the firmware's work on its last epoch,
+    /// whichever is longer. The firmware cannot answer while it computes an epoch
+    /// (one thread, on a microcontroller), so a shorter wait makes it resend answers
+    /// that were never lost.
+    fn answer_patience(&self) -> Duration {
+        let rto = Duration::from_micros(self.ep.tx.rto_us());
+        answer_patience(rto, self.stats.values().next_back().map(|s| &s.timings_us))
     }
 
     /// Nothing intact heard for `silent`: past the link time-out, the firmware
@@ -999,4 +1009,32 @@ pub fn epoch_wire_bytes(frame_bytes: usize, chunk: usize) -> usize {
         + wire_len(13); // FrameEnd
     debug_assert!(chunks >= full);
     2 * per_camera
+}
+
+/// [`Session::answer_patience`] from the retransmission time-out and the stage
+/// timings of the firmware's last epoch (assembly is the frames' transfer, not work).
+fn answer_patience(rto: Duration, last: Option<&[u32; stage::COUNT]>) -> Duration {
+    let work_us = last.map_or(0, |t| t[stage::TOTAL].saturating_sub(t[stage::ASSEMBLE]));
+    rto.max(Duration::from_micros(2 * u64::from(work_us)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_host_waits_out_the_firmware_s_work_before_it_asks_for_a_resend() {
+        let rto = Duration::from_millis(20);
+        assert_eq!(answer_patience(rto, None), rto, "no epoch yet");
+        let mut t = [0u32; stage::COUNT];
+        t[stage::ASSEMBLE] = 900_000; // the frames' transfer: not work
+        t[stage::TOTAL] = 950_000;
+        assert_eq!(answer_patience(rto, Some(&t)), Duration::from_millis(100));
+        t[stage::TOTAL] = 905_000;
+        assert_eq!(
+            answer_patience(rto, Some(&t)),
+            rto,
+            "quick work: the time-out"
+        );
+    }
 }
