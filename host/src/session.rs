@@ -868,12 +868,14 @@ impl<T: Transport> Session<T> {
 
     /// How long the firmware may be silent before the host asks it to resend: a
     /// retransmission time-out, or twice the firmware's work on its last epoch,
-    /// whichever is longer. The firmware cannot answer while it computes an epoch
-    /// (one thread, on a microcontroller), so a shorter wait makes it resend answers
-    /// that were never lost.
+    /// whichever is longer, but at most half the link time-out, so that a lost
+    /// answer is asked for before the session gives up. The firmware cannot answer
+    /// while it computes an epoch (one thread, on a microcontroller), so a shorter
+    /// wait makes it resend answers that were never lost.
     fn answer_patience(&self) -> Duration {
         let rto = Duration::from_micros(self.ep.tx.rto_us());
-        answer_patience(rto, self.stats.values().next_back().map(|s| &s.timings_us))
+        let last = self.stats.values().next_back().map(|s| &s.timings_us);
+        answer_patience(rto, last, self.opts.timeout / 2)
     }
 
     /// Nothing intact heard for `silent`: past the link time-out, the firmware
@@ -1013,9 +1015,13 @@ pub fn epoch_wire_bytes(frame_bytes: usize, chunk: usize) -> usize {
 
 /// [`Session::answer_patience`] from the retransmission time-out and the stage
 /// timings of the firmware's last epoch (assembly is the frames' transfer, not work).
-fn answer_patience(rto: Duration, last: Option<&[u32; stage::COUNT]>) -> Duration {
+fn answer_patience(
+    rto: Duration,
+    last: Option<&[u32; stage::COUNT]>,
+    at_most: Duration,
+) -> Duration {
     let work_us = last.map_or(0, |t| t[stage::TOTAL].saturating_sub(t[stage::ASSEMBLE]));
-    rto.max(Duration::from_micros(2 * u64::from(work_us)))
+    rto.max(Duration::from_micros(2 * u64::from(work_us)).min(at_most))
 }
 
 #[cfg(test)]
@@ -1025,16 +1031,19 @@ mod tests {
     #[test]
     fn the_host_waits_out_the_firmware_s_work_before_it_asks_for_a_resend() {
         let rto = Duration::from_millis(20);
-        assert_eq!(answer_patience(rto, None), rto, "no epoch yet");
+        let cap = Duration::from_millis(2500);
+        assert_eq!(answer_patience(rto, None, cap), rto, "no epoch yet");
         let mut t = [0u32; stage::COUNT];
         t[stage::ASSEMBLE] = 900_000; // the frames' transfer: not work
         t[stage::TOTAL] = 950_000;
-        assert_eq!(answer_patience(rto, Some(&t)), Duration::from_millis(100));
-        t[stage::TOTAL] = 905_000;
         assert_eq!(
-            answer_patience(rto, Some(&t)),
-            rto,
-            "quick work: the time-out"
+            answer_patience(rto, Some(&t), cap),
+            Duration::from_millis(100)
         );
+        t[stage::TOTAL] = 905_000;
+        assert_eq!(answer_patience(rto, Some(&t), cap), rto, "quick work");
+        // An epoch of 2 s on an emulated core: asked again before the link gives up.
+        t[stage::TOTAL] = 2_900_000;
+        assert_eq!(answer_patience(rto, Some(&t), cap), cap);
     }
 }
