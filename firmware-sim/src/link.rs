@@ -5,7 +5,7 @@
 use core::fmt::Write as _;
 use embedded_io::{Read, Write};
 use phototraverse_core::protocol::messages::{
-    ErrorCode, ErrorMsg, LinkCounters, Message, MAX_ERROR_TEXT,
+    ErrorCode, ErrorMsg, LinkCounters, Message, MessageType, MAX_ERROR_TEXT,
 };
 use phototraverse_core::protocol::{
     wire_len, Endpoint, EndpointBuffers, EndpointConfig, Event, CRC_LEN, HEADER_LEN, MAX_ENCODED,
@@ -285,7 +285,7 @@ impl<'b> Link<'b> {
 /// Whether the message ready in `ep` is frame data, which arrives in bursts
 /// and is acknowledged in batches (`ack_every`, or when the port runs dry).
 fn is_bulk<B: AsMut<[u8]> + AsRef<[u8]>>(ep: &Endpoint<B>) -> bool {
-    matches!(ep.rx.message(), Some((_, Ok(Message::FrameChunk(_)))))
+    ep.rx.message_type() == Some(MessageType::FrameChunk)
 }
 
 #[cfg(test)]

@@ -110,12 +110,22 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> Inbound<B> {
     /// The message being delivered and its sequence number, or why it cannot be
     /// parsed (it is intact: its sequence number is used up all the same).
     pub fn message(&self) -> Option<(u16, Result<Message<'_>, ParseError>)> {
-        let packet = match self.current.clone()? {
-            None => self.decoder.packet()?,
-            Some(range) => super::Packet::new_unchecked(self.reorder.bytes(range)),
-        };
+        let packet = self.current_packet()?;
         let t = packet.type_byte();
         Some((self.current_seq, Message::parse(t, packet.into_payload())))
+    }
+
+    /// The type of the message being delivered, without parsing it (`None` for an
+    /// unknown type byte).
+    pub fn message_type(&self) -> Option<MessageType> {
+        self.current_packet()?.message_type()
+    }
+
+    fn current_packet(&self) -> Option<super::Packet<&[u8]>> {
+        match self.current.clone()? {
+            None => self.decoder.packet(),
+            Some(range) => Some(super::Packet::new_unchecked(self.reorder.bytes(range))),
+        }
     }
 
     /// Decoding figures of what arrived.

@@ -20,14 +20,20 @@ weighting has to handle.
 
     phototraverse synth --scene straight --frames 100 --depth --out D
     phototraverse run D --out D/run
-    python3 bench/match/precision.py D/run D
+    python3 bench/traverse/precision.py D/run D
 
-usage: precision.py RUN_DIR DATASET_DIR        (numpy)
+usage: precision.py RUN_DIR DATASET_DIR        (numpy; opencv-python for peer_vo's reader)
 """
 import os
 import sys
 
 import numpy as np
+
+from peer_vo import read_calib
+from steps import read_poses
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "sift"))
+from bench import read_pfm  # noqa: E402 (the SIFT bench's PFM reader)
 
 # Differences beyond this (px) are blunders, not precision: counted apart.
 BLUNDER_PX = 1.5
@@ -35,36 +41,11 @@ BLUNDER_PX = 1.5
 EDGE_RANGE = 0.01
 
 
-def read_calib(dataset):
-    """Focal length (px), principal point and base (m) from KITTI's P0 and P1."""
-    rows = {}
-    with open(os.path.join(dataset, "calib.txt")) as f:
-        for line in f:
-            key, _, values = line.partition(":")
-            rows[key.strip()] = np.array([float(v) for v in values.split()]).reshape(3, 4)
-    p0, p1 = rows["P0"], rows["P1"]
+def rig(dataset):
+    """Focal length (px), principal point and base (m) of a rectified KITTI pair."""
+    p0, p1 = read_calib(os.path.join(dataset, "calib.txt"))
     f = p0[0, 0]
     return f, p0[0, 2], p0[1, 2], -p1[0, 3] / f
-
-
-def read_poses(path):
-    poses = []
-    with open(path) as f:
-        for line in f:
-            if line.strip():
-                m = np.eye(4)
-                m[:3] = np.array([float(v) for v in line.split()]).reshape(3, 4)
-                poses.append(m)
-    return poses
-
-
-def read_pfm(path):
-    with open(path, "rb") as f:
-        f.readline()
-        w, h = map(int, f.readline().split())
-        scale = float(f.readline())
-        data = np.frombuffer(f.read(), dtype="<f4" if scale < 0 else ">f4").reshape(h, w)
-    return np.flipud(data)
 
 
 class Depths:
@@ -124,7 +105,7 @@ def main():
     if len(sys.argv) != 3:
         sys.exit(__doc__)
     run, dataset = sys.argv[1], sys.argv[2]
-    f, cx, cy, base = read_calib(dataset)
+    f, cx, cy, base = rig(dataset)
     poses = read_poses(os.path.join(dataset, "gt_poses.txt"))
     depths = Depths(dataset)
     images = read_model(run)
