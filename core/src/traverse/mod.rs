@@ -306,18 +306,16 @@ impl<'a> Traverse<'a> {
         })
     }
 
-    /// The window's tie points with their standard deviations.
+    /// The window's tie points with their track ids and standard deviations: those of
+    /// descriptor tracks and of area tracks alike, excluded points left out.
     pub fn window_points(&self) -> impl Iterator<Item = (u32, [f64; 3], Option<[f64; 3]>)> + '_ {
-        self.track_points
-            .iter()
-            .filter(|t| t.point != u32::MAX)
-            .filter_map(move |t| {
-                Some((
-                    t.track_id,
-                    self.window.point(t.point)?,
-                    self.window.point_std(t.point),
-                ))
-            })
+        self.window.point_ids().filter_map(move |p| {
+            Some((
+                self.window.point_tag(p)?,
+                self.window.point(p)?,
+                self.window.point_std(p),
+            ))
+        })
     }
 
     /// The rig as the adjustment has it (the calibration when it is not estimated)

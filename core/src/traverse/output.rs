@@ -124,8 +124,10 @@ pub struct EpochOutput {
     pub tie_points: u32,
     /// New tie points added to the window at this epoch.
     pub new_points: u32,
-    /// Image observations and tie points in the window after this epoch.
+    /// Image observations in the window after this epoch.
     pub observations: u32,
+    /// Points in the window after this epoch (descriptor and area tie points, the
+    /// excluded ones included): the use of `AdjustConfig::max_points`.
     pub points: u32,
     /// Observations flagged as blunders in the last adjustment.
     pub flagged_observations: u32,

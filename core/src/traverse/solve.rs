@@ -90,7 +90,7 @@ impl Traverse<'_> {
             out.flags |= flags::CAPACITY;
         }
         out.observations = self.window.observations().len() as u32;
-        out.points = self.window_points().count() as u32;
+        out.points = self.window.point_ids().count() as u32;
         adjusted
     }
 

@@ -376,3 +376,27 @@ fn a_full_window_counts_what_each_epoch_dropped() {
     assert!(sum > 0, "the capacity was reached");
     assert_eq!(sum, points + observations, "the epochs' counts add up");
 }
+
+#[test]
+fn the_window_counts_the_points_of_area_ties_too() {
+    // The points' capacity use is every point the window's observations reach, those
+    // of area tracks as well as those of descriptor tracks.
+    let cfg = config();
+    let (mut st, _) = storage(&cfg);
+    let mut arena = Arena::new(&mut st.0);
+    let mut t = Traverse::new(cfg, &mut arena).unwrap();
+    let rig = rig();
+    for k in 0..6 {
+        let out = process_view(&mut t, &rig, &truth(k), k as f64);
+        let observed: std::collections::BTreeSet<u32> = (0..t.window_observation_count())
+            .filter_map(|i| t.window_observation(i))
+            .map(|o| o.point)
+            .collect();
+        assert_eq!(out.points as usize, observed.len(), "epoch {k}");
+        let listed = t.window_points().count();
+        assert!(listed <= observed.len(), "epoch {k}: {listed} listed");
+        if k > 1 {
+            assert!(listed > observed.len() / 2, "epoch {k}: {listed} listed");
+        }
+    }
+}

@@ -112,6 +112,14 @@ impl<'a> Window<'a> {
         ])
     }
 
+    /// Ids of the points the window holds (with an observation or a prior), excluded
+    /// ones included: the slots of [`AdjustConfig::max_points`] in use.
+    pub fn point_ids(&self) -> impl Iterator<Item = u32> + '_ {
+        (0..self.n_point_slots)
+            .filter(|&p| self.points[p].flags & PT_USED != 0)
+            .map(|p| p as u32)
+    }
+
     /// Standard deviations of a point, metres.
     pub fn point_std(&self, point: u32) -> Option<[f64; 3]> {
         let p = self.point_slot(point).ok()?;

@@ -133,7 +133,7 @@ pub struct Counts {
     pub stereo_matches: u32,
     /// Tie points linking this epoch to the previous one (seen in both stereo pairs).
     pub tie_points: u32,
-    /// Tie points in the adjustment window after this epoch.
+    /// Points in the adjustment window after this epoch (of descriptor and area tracks).
     pub window_points: u32,
     /// Image observations in the adjustment window after this epoch.
     pub observations: u32,
