@@ -3,12 +3,13 @@
 ground truth in its report.json, and against an images-only run of the same dataset
 (`--images-only`) re-anchored to the truth at the outage's first epoch.
 
-Prints, for the epochs whose time lies in the outage: the largest position error, the same
+Prints, for the epochs whose time lies in the outage: the largest position error; the same
 for the images-only run after re-anchoring (its pose at the outage's first epoch replaced by
-the truth, the rest of its trajectory moved rigidly with it) and, as what an aided run could
-at best give, for the re-anchored images-only run also closed on the truth at the first epoch
-after the outage (its misclosure there spread in proportion to the epochs), and the share of epochs whose
-error is within 3 standard deviations on each coordinate (the sd of eop.csv / report.json);
+the truth, the rest of its trajectory moved rigidly with it); the same again with the
+re-anchored run also closed on the truth at the first epoch after the outage, its misclosure
+there spread in proportion to the epochs (what an aided run that entered the outage without
+error could give); and the share of epochs whose error is within 3 standard deviations on
+each coordinate (the sd of eop.csv / report.json);
 for the other epochs: the RMS position error (3D) and per coordinate; and the same two figures
 for the positions as the firmware output them (`realtime_centre_m`), before `run` smoothed them
 over all the fixes. Distances in metres.
