@@ -306,18 +306,6 @@ impl<'a> Traverse<'a> {
         })
     }
 
-    /// The window's tie points with their track ids and standard deviations: those of
-    /// descriptor tracks and of area tracks alike, excluded points left out.
-    pub fn window_points(&self) -> impl Iterator<Item = (u32, [f64; 3], Option<[f64; 3]>)> + '_ {
-        self.window.point_ids().filter_map(move |p| {
-            Some((
-                self.window.point_tag(p)?,
-                self.window.point(p)?,
-                self.window.point_std(p),
-            ))
-        })
-    }
-
     /// The rig as the adjustment has it (the calibration when it is not estimated)
     /// and its standard deviations (zero when fixed).
     pub fn rig_estimate(&self) -> (crate::camera::RelativeOrientation, [f64; 6]) {
