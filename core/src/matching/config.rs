@@ -226,7 +226,7 @@ impl MatchConfig {
         budget.add(
             "match.stereo",
             s,
-            2 * (3 * slice_bytes::<u32>(n) + slice_bytes::<[f32; 2]>(n)),
+            2 * (3 * slice_bytes::<u32>(n) + 2 * slice_bytes::<[f32; 2]>(n)),
         );
 
         budget.add(

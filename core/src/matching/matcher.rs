@@ -103,6 +103,8 @@ pub struct StereoMatch {
     pub left_px: [f32; 2],
     /// Right position (pixels): the keypoint's, or the refined one.
     pub right_px: [f32; 2],
+    /// The refined right position's precision (pixels; x, y), zero when unrefined.
+    pub right_sigma: [f32; 2],
     /// Squared descriptor distance.
     pub distance: u32,
 }
@@ -126,6 +128,8 @@ struct StereoSide<'a> {
     right_of: &'a mut [u32],
     /// Right pixel position per left keypoint (refined when enabled).
     right_px: &'a mut [[f32; 2]],
+    /// Its precision from the refinement (pixels; x, y), zero when unrefined.
+    right_sigma: &'a mut [[f32; 2]],
     /// Descriptor distance per left keypoint.
     dist: &'a mut [u32],
     /// Track slot per left keypoint.
@@ -141,6 +145,7 @@ impl<'a> StereoSide<'a> {
         let s = StereoSide {
             right_of: carve(arena, n)?,
             right_px: carve(arena, n)?,
+            right_sigma: carve(arena, n)?,
             dist: carve(arena, n)?,
             track: carve(arena, n)?,
             n_left: 0,
@@ -321,12 +326,14 @@ impl<'a> Matcher<'a> {
             }
             let (kl, kr) = (&pair.left.keypoints[i], &right.keypoints[j as usize]);
             cur.right_px[i] = [kr.x, kr.y];
+            cur.right_sigma[i] = [0.0; 2];
             let (Some(rc), Some((li, ri))) = (self.cfg.refine, images) else {
                 continue;
             };
             match refine_checked(&li, &ri, [kl.x, kl.y], [kr.x, kr.y], &rc) {
-                Ok((p, _)) => {
-                    cur.right_px[i] = p;
+                Ok(p) => {
+                    cur.right_px[i] = p.at;
+                    cur.right_sigma[i] = p.sigma;
                     stats.refined += 1;
                 }
                 Err(RefineError::Border) => stats.refine_border += 1,
@@ -363,6 +370,7 @@ impl<'a> Matcher<'a> {
                 right: j,
                 left_px: [left[i].x, left[i].y],
                 right_px: cur.right_px[i],
+                right_sigma: cur.right_sigma[i],
                 distance: cur.dist[i],
             })
         })
@@ -638,11 +646,13 @@ impl<'a> Matcher<'a> {
                     epoch: epoch.wrapping_sub(1),
                     left: [pl[i].x, pl[i].y],
                     right: pside.right_px[i],
+                    right_sigma: pside.right_sigma[i],
                 },
                 Observation {
                     epoch,
                     left: [cl[a].x, cl[a].y],
                     right: cside.right_px[a],
+                    right_sigma: cside.right_sigma[a],
                 },
             )
         });
@@ -762,9 +772,22 @@ impl<'a> Matcher<'a> {
     }
 
     /// Replaces the current-epoch positions of the tie point in track `slot` (after a
-    /// refinement the matcher cannot do, e.g. against the previous epoch's image).
-    pub fn refine_tie_point(&mut self, slot: u32, left: [f32; 2], right: [f32; 2]) -> bool {
-        self.tracks.set_positions(slot, self.epoch, left, right)
+    /// refinement the matcher cannot do, e.g. against the previous epoch's image), with
+    /// the right position's precision.
+    pub fn refine_tie_point(
+        &mut self,
+        slot: u32,
+        (left, right): ([f32; 2], [f32; 2]),
+        right_sigma: [f32; 2],
+    ) -> bool {
+        let epoch = self.epoch;
+        let o = Observation {
+            epoch,
+            left,
+            right,
+            right_sigma,
+        };
+        self.tracks.set_observation(slot, o)
     }
 
     /// A fresh tie point identity (see `Tracks::allocate_id`).

@@ -43,6 +43,10 @@ pub struct Observation {
     pub epoch: u32,
     pub left: [f32; 2],
     pub right: [f32; 2],
+    /// Standard deviations (pixels; x, y) of `right` as its stereo correlation gave
+    /// them ([`super::refine::Peak`]); zero where none measured it (a right
+    /// keypoint's own position).
+    pub right_sigma: [f32; 2],
 }
 
 /// What one update did.
@@ -102,19 +106,13 @@ impl<'a> Tracks<'a> {
         (o.epoch == epoch).then_some(o)
     }
 
-    /// Replaces the positions of track `slot` at `epoch` (a later refinement of the
-    /// same observation); false when the track has no observation there.
-    pub fn set_positions(
-        &mut self,
-        slot: u32,
-        epoch: u32,
-        left: [f32; 2],
-        right: [f32; 2],
-    ) -> bool {
-        if self.observation(slot, epoch).is_none() {
+    /// Replaces the observation of track `slot` at `o.epoch` (a later refinement of
+    /// the same observation); false when the track has no observation there.
+    pub fn set_observation(&mut self, slot: u32, o: Observation) -> bool {
+        if self.observation(slot, o.epoch).is_none() {
             return false;
         }
-        self.record(slot as usize, Observation { epoch, left, right });
+        self.record(slot as usize, o);
         true
     }
 

@@ -14,6 +14,7 @@
 //! descriptors win every conflict, so an image point is observed once.
 
 use super::patches::{PatchInfo, NO_ID};
+use super::solve::StereoPx;
 use super::Traverse;
 use crate::camera::{project_to_pixel, Pose};
 use crate::image::ImageView;
@@ -29,9 +30,10 @@ pub struct AreaTie {
     /// Observation tag (track id) and window point; [`NO_ID`] until the point exists.
     pub tag: u32,
     pub point: u32,
-    /// Current left and right positions, pixels.
+    /// Current left and right positions, pixels, and the right one's precision.
     pub left: [f32; 2],
     pub right: [f32; 2],
+    pub right_sigma: [f32; 2],
 }
 
 /// Predicted left and right pixels of a template's point, and its depths (metres) at
@@ -121,8 +123,8 @@ impl Traverse<'_> {
             let Ok(found) = correlate(&tpl, half, left, pl, (r, r), rcfg.min_ncc) else {
                 continue;
             };
-            let (l, _) = recentre(&tpl, half, left, found, (1, 1), rcfg.min_ncc);
-            let Ok((right_px, _)) = refine_checked(left, right, l, pr, &rcfg) else {
+            let l = recentre(&tpl, half, left, found, (1, 1), rcfg.min_ncc).at;
+            let Ok(r) = refine_checked(left, right, l, pr, &rcfg) else {
                 continue;
             };
             let duplicate = self.matcher.tie_points().any(|t| near(t.cur.left, l))
@@ -135,7 +137,8 @@ impl Traverse<'_> {
                 tag: info.tag,
                 point: info.point,
                 left: l,
-                right: right_px,
+                right: r.at,
+                right_sigma: r.sigma,
             };
             self.n_area += 1;
         }
@@ -177,7 +180,12 @@ impl Traverse<'_> {
                 (t.tag, t.point)
             } else {
                 let Some(p) = self.patches.as_ref().and_then(|p| {
-                    Some((p.key(t.entry as usize)?, p.info(t.entry as usize)?.right))
+                    let info = p.info(t.entry as usize)?;
+                    Some(StereoPx {
+                        left: p.key(t.entry as usize)?,
+                        right: info.right,
+                        right_sigma: info.right_sigma,
+                    })
                 }) else {
                     continue;
                 };
@@ -189,7 +197,11 @@ impl Traverse<'_> {
                 new_points += 1;
                 (tag, point)
             };
-            let obs = (t.left, t.right);
+            let obs = StereoPx {
+                left: t.left,
+                right: t.right,
+                right_sigma: t.right_sigma,
+            };
             super::add_stereo_observations(&self.cfg, &mut self.window, id, point, obs, tag);
             self.area[a].tag = tag;
             self.area[a].point = point;
@@ -203,6 +215,7 @@ impl From<&AreaTie> for PatchInfo {
     fn from(a: &AreaTie) -> Self {
         PatchInfo {
             right: a.right,
+            right_sigma: a.right_sigma,
             tag: a.tag,
             point: a.point,
         }

@@ -63,3 +63,15 @@ pub const TRAVERSE_VELOCITY_SIGMA: f64 = 2.0;
 /// the errors a traverse accumulates, and the constraints' weights were tuned against
 /// it (docs/adjustment.md, Quality).
 pub const TRAVERSE_SIGMA_PX: f64 = 0.5;
+
+/// The model of a right-image observation's sigma from its stereo correlation peak
+/// (`solve::observation_sigma_px`): `sqrt(FLOOR^2 + (GAIN x peak)^2)` pixels, scaled so
+/// that [`TRAVERSE_SIGMA_PX`] stands for an observation modelled at
+/// `TYPICAL_PEAK_SIGMA_PX`. Fitted to the disparity errors of rendered streets against
+/// their depth maps (`bench/traverse/README.md`, "Observation weights from the
+/// correlation peak"): the floor is what the sharpest peaks still err by, the gain
+/// what the peak's own figure underestimates by. A gain of 4 (weights spread 25-fold)
+/// did worse on three scenes of six than this 2.
+pub const PEAK_SIGMA_FLOOR_PX: f64 = 0.05;
+pub const PEAK_SIGMA_GAIN: f64 = 2.0;
+pub const TYPICAL_PEAK_SIGMA_PX: f64 = 0.08;

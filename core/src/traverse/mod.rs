@@ -93,6 +93,7 @@ pub struct Refined {
     pub entry: u32,
     pub left: [f32; 2],
     pub right: [f32; 2],
+    pub right_sigma: [f32; 2],
 }
 
 const NO_POINT: TrackPoint = TrackPoint {

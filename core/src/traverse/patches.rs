@@ -39,6 +39,8 @@ pub const NO_ID: u32 = u32::MAX;
 pub struct PatchInfo {
     /// Right position (pixels) at the templates' epoch.
     pub right: [f32; 2],
+    /// Precision of `right` (pixels; x, y; zero: not measured).
+    pub right_sigma: [f32; 2],
     /// Observation tag (track id) of the window point, [`NO_ID`] when there is none.
     pub tag: u32,
     /// Window point, [`NO_ID`] for a stereo match that is not a tie point yet.
@@ -47,9 +49,10 @@ pub struct PatchInfo {
 
 impl PatchInfo {
     /// A stereo match that is no window point yet.
-    pub fn stereo(right: [f32; 2]) -> Self {
+    pub fn stereo(right: [f32; 2], right_sigma: [f32; 2]) -> Self {
         PatchInfo {
             right,
+            right_sigma,
             tag: NO_ID,
             point: NO_ID,
         }
@@ -286,12 +289,18 @@ mod tests {
         p.begin(Some(0));
         let info = PatchInfo {
             right: [4.0, 12.5],
+            right_sigma: [0.04, 0.0],
             tag: 7,
             point: 3,
         };
         assert!(p.push(&view, [10.25, 12.5], info, Some(12.0)));
         assert!(!p.push(&view, [0.5, 0.5], info, None), "border");
-        assert!(p.push(&view, [20.0, 15.0], PatchInfo::stereo([12.0, 15.0]), None));
+        assert!(p.push(
+            &view,
+            [20.0, 15.0],
+            PatchInfo::stereo([12.0, 15.0], [0.1, 0.0]),
+            None
+        ));
         assert!(!p.push(&view, [21.0, 15.0], info, None), "full");
         assert_eq!(p.anchor_depth(0), Some(12.0));
         assert_eq!(p.anchor_depth(1), None);
@@ -324,11 +333,16 @@ mod tests {
         let mut arena = Arena::new(&mut store);
         let mut p = Patches::new(&mut arena, 2, 2).unwrap();
         p.begin(Some(0));
-        assert!(p.push(&va, [10.0, 10.0], PatchInfo::stereo([5.0, 10.0]), Some(8.0)));
+        assert!(p.push(
+            &va,
+            [10.0, 10.0],
+            PatchInfo::stereo([5.0, 10.0], [0.0; 2]),
+            Some(8.0)
+        ));
         assert!(p.push(
             &va,
             [20.0, 12.0],
-            PatchInfo::stereo([15.0, 12.0]),
+            PatchInfo::stereo([15.0, 12.0], [0.0; 2]),
             Some(9.0)
         ));
         let mut anchor = [0f32; TEMPLATE_LEN];
@@ -336,9 +350,19 @@ mod tests {
         // Next epoch: template 1 is carried on to a new position, slot 0 is re-used.
         p.begin(Some(1));
         assert_eq!(p.key(0), None, "stale until kept");
-        assert!(p.keep(1, [22.0, 12.5], PatchInfo::stereo([16.0, 12.5])));
-        assert!(p.push(&vb, [30.0, 15.0], PatchInfo::stereo([25.0, 15.0]), None));
-        assert!(!p.push(&vb, [31.0, 15.0], PatchInfo::stereo([26.0, 15.0]), None));
+        assert!(p.keep(1, [22.0, 12.5], PatchInfo::stereo([16.0, 12.5], [0.0; 2])));
+        assert!(p.push(
+            &vb,
+            [30.0, 15.0],
+            PatchInfo::stereo([25.0, 15.0], [0.0; 2]),
+            None
+        ));
+        assert!(!p.push(
+            &vb,
+            [31.0, 15.0],
+            PatchInfo::stereo([26.0, 15.0], [0.0; 2]),
+            None
+        ));
         assert_eq!(p.index_of([22.0, 12.5]), Some(1));
         assert_eq!(p.index_of([30.0, 15.0]), Some(0));
         assert_eq!(p.index_of([20.0, 12.0]), None, "the old key is gone");

@@ -31,21 +31,23 @@ impl Traverse<'_> {
             let Ok(found) = correlate(&tpl, h, left, tie.cur.left, (rad, rad), rcfg.min_ncc) else {
                 continue;
             };
-            let (l, _) = recentre(&tpl, h, left, found, (1, 1), rcfg.min_ncc);
-            let Ok((r, _)) = refine_checked(left, right, l, tie.cur.right, &rcfg) else {
+            let l = recentre(&tpl, h, left, found, (1, 1), rcfg.min_ncc);
+            let Ok(r) = refine_checked(left, right, l.at, tie.cur.right, &rcfg) else {
                 continue;
             };
             self.refined[n] = Refined {
                 slot: tie.slot,
                 entry: entry as u32,
-                left: l,
-                right: r,
+                left: l.at,
+                right: r.at,
+                right_sigma: r.sigma,
             };
             n += 1;
         }
         self.n_refined = n;
         for r in self.refined[..n].iter() {
-            self.matcher.refine_tie_point(r.slot, r.left, r.right);
+            self.matcher
+                .refine_tie_point(r.slot, (r.left, r.right), r.right_sigma);
         }
     }
 
@@ -118,7 +120,8 @@ impl Traverse<'_> {
         for m in self.matcher.stereo_matches(kps) {
             if !quads.iter().any(|q| q.cur_left == m.left) {
                 let depth = stereo_depth(cfg, window, m.left_px, m.right_px);
-                patches.push(left, m.left_px, PatchInfo::stereo(m.right_px), depth);
+                let info = PatchInfo::stereo(m.right_px, m.right_sigma);
+                patches.push(left, m.left_px, info, depth);
             }
         }
         self.store_line_matches(fill, (left, right));
@@ -158,11 +161,12 @@ impl Traverse<'_> {
             let Ok(guess) = search_line(&tpl, h, right, line, accept) else {
                 continue;
             };
-            let Ok((r, _)) = refine_checked(left, right, at, guess, &rcfg) else {
+            let Ok(r) = refine_checked(left, right, at, guess, &rcfg) else {
                 continue;
             };
-            let depth = stereo_depth(cfg, window, at, r);
-            live += usize::from(patches.push(left, at, PatchInfo::stereo(r), depth));
+            let depth = stereo_depth(cfg, window, at, r.at);
+            let info = PatchInfo::stereo(r.at, r.sigma);
+            live += usize::from(patches.push(left, at, info, depth));
         }
     }
 }
@@ -216,10 +220,11 @@ fn tie_info(map: &[TrackPoint], window: &Window, tie: &TiePoint) -> PatchInfo {
     match known_point(map, window, tie) {
         Some(point) => PatchInfo {
             right: tie.cur.right,
+            right_sigma: tie.cur.right_sigma,
             tag: tie.track_id,
             point,
         },
-        None => PatchInfo::stereo(tie.cur.right),
+        None => PatchInfo::stereo(tie.cur.right, tie.cur.right_sigma),
     }
 }
 

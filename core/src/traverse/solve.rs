@@ -151,7 +151,7 @@ impl Traverse<'_> {
                 Some(p) => p,
                 None => {
                     let at = (prev_id, &prev);
-                    let obs = (tie.prev.left, tie.prev.right);
+                    let obs = StereoPx::from(&tie.prev);
                     let Some(p) = new_point(&self.cfg, &mut self.window, at, obs, tie.track_id)
                     else {
                         continue;
@@ -166,7 +166,7 @@ impl Traverse<'_> {
                     p
                 }
             };
-            let obs = (tie.cur.left, tie.cur.right);
+            let obs = StereoPx::from(&tie.cur);
             add_stereo_observations(&self.cfg, &mut self.window, id, point, obs, tie.track_id);
         }
         new_points + self.add_area_ties(id, (prev_id, &prev))
@@ -299,23 +299,72 @@ pub(super) fn known_point(map: &[TrackPoint], window: &Window, tie: &TiePoint) -
         .filter(|&p| window.point_tag(p) == Some(tie.track_id))
 }
 
-/// An image observation of `point` at pixel `px`, weighted by the configured sigma.
+/// A stereo observation of one epoch: left and right pixels, and the right one's
+/// precision from its stereo correlation (pixels; x, y; zero: not measured).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct StereoPx {
+    pub left: [f32; 2],
+    pub right: [f32; 2],
+    pub right_sigma: [f32; 2],
+}
+
+impl From<&crate::matching::Observation> for StereoPx {
+    fn from(o: &crate::matching::Observation) -> Self {
+        StereoPx {
+            left: o.left,
+            right: o.right,
+            right_sigma: o.right_sigma,
+        }
+    }
+}
+
+/// An image observation of `point` at pixel `px` whose correlation gave it the
+/// precision `sigma` (pixels; x, y; zero: not correlated), weighted by
+/// [`observation_sigma_px`].
 fn observation(
     cfg: &TraverseConfig,
-    epoch: u32,
-    camera: Camera,
+    (epoch, camera): (u32, Camera),
     point: u32,
-    px: [f32; 2],
+    (px, sigma): ([f32; 2], [f32; 2]),
     tag: u32,
 ) -> Observation {
     let interior = cfg.rig.interior(camera);
     let xy = interior.pixel_to_corrected(px[0] as f64, px[1] as f64);
-    let s = cfg.sigma_px;
     let [sx, sy] = interior.pixel_size_mm;
-    let weight = [1.0 / (s * sx * s * sx), 1.0 / (s * sy * s * sy)];
+    let [wx, wy] = sigma.map(|s| observation_sigma_px(cfg.sigma_px, s));
+    let weight = [1.0 / (wx * sx * wx * sx), 1.0 / (wy * sy * wy * sy)];
     let mut o = Observation::new(epoch, camera, point, xy, weight);
     o.tag = tag;
     o
+}
+
+/// The a-priori sigma (pixels) of a right-image observation on one axis whose stereo
+/// correlation peak put its precision at `peak_sigma` pixels
+/// ([`crate::matching::refine::Peak`]), zero when no correlation measured it.
+///
+/// Why: a disparity's error follows the texture it was matched on. Measured against
+/// rendered truth (`bench/traverse/README.md`, "Observation weights from the
+/// correlation peak"), the disparity errors of the fifth of the matches with the
+/// sharpest peaks were a quarter of those of the fifth with the flattest ones, and most
+/// of the tails the robust weighting has to catch are in the latter. The peak's own
+/// figure accounts for the noise and the texture; [`defaults::PEAK_SIGMA_FLOOR_PX`]
+/// for what it cannot see (interpolation, the template's change of shape), and
+/// [`defaults::PEAK_SIGMA_GAIN`] for its optimism. `sigma_px` is the sigma of an
+/// observation of [`defaults::TYPICAL_PEAK_SIGMA_PX`]'s modelled precision, and of
+/// every position no correlation measured (a keypoint's own).
+///
+/// The left image's observations keep `sigma_px`: weighted by their temporal peaks
+/// too, the per-step errors fell further on calibrated rigs, but the window then
+/// balanced the images worse against what else it holds (a calibration corrected
+/// from the first epochs, GNSS fixes before an outage): `bench/traverse/README.md`.
+pub(super) fn observation_sigma_px(sigma_px: f64, peak_sigma: f32) -> f64 {
+    use super::defaults::{PEAK_SIGMA_FLOOR_PX, PEAK_SIGMA_GAIN, TYPICAL_PEAK_SIGMA_PX};
+    if !(peak_sigma > 0.0 && peak_sigma.is_finite()) {
+        return sigma_px;
+    }
+    let s = PEAK_SIGMA_GAIN * peak_sigma as f64;
+    let modelled = libm::sqrt(PEAK_SIGMA_FLOOR_PX * PEAK_SIGMA_FLOOR_PX + s * s);
+    sigma_px * modelled / TYPICAL_PEAK_SIGMA_PX
 }
 
 /// Observations of `point` in both images of window epoch `id`.
@@ -324,11 +373,14 @@ pub(super) fn add_stereo_observations(
     window: &mut Window,
     id: u32,
     point: u32,
-    (left, right): ([f32; 2], [f32; 2]),
+    obs: StereoPx,
     tag: u32,
 ) {
-    for (cam, px) in [(Camera::Left, left), (Camera::Right, right)] {
-        let _ = window.add_observation(observation(cfg, id, cam, point, px, tag));
+    for (cam, px) in [
+        (Camera::Left, (obs.left, [0.0; 2])),
+        (Camera::Right, (obs.right, obs.right_sigma)),
+    ] {
+        let _ = window.add_observation(observation(cfg, (id, cam), point, px, tag));
     }
 }
 
@@ -363,11 +415,11 @@ pub(super) fn new_point(
     cfg: &TraverseConfig,
     window: &mut Window,
     at: (u32, &[Pose; 2]),
-    obs: ([f32; 2], [f32; 2]),
+    obs: StereoPx,
     tag: u32,
 ) -> Option<u32> {
     let (prev_id, poses) = at;
-    let xyz = intersect_pair(cfg, poses, obs.0, obs.1)?;
+    let xyz = intersect_pair(cfg, poses, obs.left, obs.right)?;
     let point = window.add_point(xyz).ok()?;
     add_stereo_observations(cfg, window, prev_id, point, obs, tag);
     Some(point)

@@ -388,6 +388,7 @@ mod tests {
             right: 0,
             left_px: [10.0, 20.0],
             right_px: [3.25, 20.0],
+            right_sigma: [0.05; 2],
             distance: 0,
         }]);
         assert_eq!(line, "10.500 20.500 3.750 20.500\n");

@@ -84,7 +84,8 @@ fn ncc_refinement_recovers_subpixel_disparity() {
     };
     for x in [40.0f32, 55.3, 70.8] {
         let start = [x - 10.0, 30.0]; // a keypoint 0.37 px off
-        let (p, score) = refine_match(&li, &ri, [x, 30.0], start, &cfg).unwrap();
+        let found = refine_match(&li, &ri, [x, 30.0], start, &cfg).unwrap();
+        let (p, score) = (found.at, found.score);
         assert!(score > 0.95);
         assert!(
             (p[0] - (x - 10.37)).abs() < 0.08,
@@ -145,7 +146,7 @@ fn row_search_finds_the_disparity_and_refuses_a_repeated_texture() {
         assert!((guess[0] - (x - 23.6)).abs() <= 0.5, "{guess:?} at {x}");
         assert_eq!(guess[1], 30.0);
         // The refinement's own error on this texture reaches 0.1 px at x = 60.
-        let (p, _) = refine_checked(&li, &ri, [x, 30.0], guess, &cfg).unwrap();
+        let p = refine_checked(&li, &ri, [x, 30.0], guess, &cfg).unwrap().at;
         assert!((p[0] - (x - 23.6)).abs() < 0.12, "{p:?} at {x}");
     }
     // A sloping line (a general rig): the match 23.6 px left and 2.36 px up.
@@ -178,7 +179,9 @@ fn row_search_finds_the_disparity_and_refuses_a_repeated_texture() {
         assert!((guess[1] - 27.64).abs() <= 0.05, "{guess:?} at {x}");
         // The two-axis refinement is a single fit, without the row's re-centring: up to
         // 0.35 px across the row on this texture.
-        let (p, _) = refine_checked(&gli, &gri, [x, 30.0], guess, &free).unwrap();
+        let p = refine_checked(&gli, &gri, [x, 30.0], guess, &free)
+            .unwrap()
+            .at;
         assert!(
             (p[0] - (x - 23.6)).abs() < 0.1 && (p[1] - 27.64).abs() < 0.4,
             "{p:?}"
@@ -348,10 +351,10 @@ fn a_recentred_correlation_does_not_lean_towards_its_start() {
             .fold((f32::MAX, f32::MIN), |a, &x| (a.0.min(x), a.1.max(x)));
         hi - lo
     };
-    let single = spread(&|s| refine::correlate(&tpl, 4, &ri, s, (2, 0), 0.9).unwrap().0);
+    let single = spread(&|s| refine::correlate(&tpl, 4, &ri, s, (2, 0), 0.9).unwrap().at);
     let centred = spread(&|s| {
         let found = refine::correlate(&tpl, 4, &ri, s, (2, 0), 0.9).unwrap();
-        refine::recentre(&tpl, 4, &ri, found, (1, 0), 0.9).0
+        refine::recentre(&tpl, 4, &ri, found, (1, 0), 0.9).at
     });
     // Measured: 0.032 px from the single fit, 0.002 px re-centred.
     assert!(single > 0.02, "single fit: {single} px");
@@ -423,7 +426,8 @@ fn correlate_agrees_with_a_direct_ncc_at_every_search_size() {
         } else {
             0.0
         };
-        let (p, peak) = refine::correlate(&tpl, half, &iv, start, (rx, ry), 0.5).unwrap();
+        let found = refine::correlate(&tpl, half, &iv, start, (rx, ry), 0.5).unwrap();
+        let (p, peak) = (found.at, found.score);
         let what = std::format!("half {half}, radius ({rx}, {ry})");
         assert!(
             (peak as f64 - best).abs() < 1e-4,
@@ -440,4 +444,82 @@ fn correlate_agrees_with_a_direct_ncc_at_every_search_size() {
             p[1]
         );
     }
+}
+
+/// The precision a peak reports ([`refine::Peak`]) follows what limits the match: it
+/// grows with the noise of the searched image and with the breadth of the texture, and
+/// the measured errors grow with it.
+#[test]
+fn a_peak_reports_the_precision_of_its_match() {
+    let (w, h) = (120, 60);
+    // Noise of about `amp` grey levels on the right image.
+    let noisy = |img: &[u8], amp: f64| -> std::vec::Vec<u8> {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        img.iter()
+            .map(|&v| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                let n = ((state >> 40) as f64 / (1u64 << 24) as f64 - 0.5) * 2.0 * amp;
+                (v as f64 + n).round().clamp(0.0, 255.0) as u8
+            })
+            .collect()
+    };
+    // Mean reported sigma and RMS error (x) over matches of a texture whose right
+    // image is the left shifted by 10.37 px, searched along the row.
+    let measure = |make: &dyn Fn(f64) -> std::vec::Vec<u8>, amp: f64| -> (f32, f32) {
+        let left = make(0.0);
+        let right = noisy(&make(10.37), amp);
+        let (li, ri) = (view(&left, w, h), view(&right, w, h));
+        let (mut sigma, mut err2, mut n) = (0f32, 0f32, 0f32);
+        for i in 0..40 {
+            let (x, y) = (30.0 + 1.5 * i as f32, 20.0 + (i % 4) as f32 * 5.0);
+            let mut tpl = [0f32; refine::TEMPLATE_LEN];
+            refine::sample_template(&li, [x, y], 4, &mut tpl).unwrap();
+            let Ok(p) = refine::correlate(&tpl, 4, &ri, [x - 10.0, y], (2, 0), 0.5) else {
+                continue;
+            };
+            assert!(p.sigma[0].is_finite() && p.sigma[0] > 0.0, "{p:?}");
+            sigma += p.sigma[0];
+            err2 += (p.at[0] - (x - 10.37)).powi(2);
+            n += 1.0;
+        }
+        assert!(n >= 30.0, "{n} of 40 matched");
+        (sigma / n, libm::sqrtf(err2 / n))
+    };
+    let fine = |s: f64| texture(w, h, s);
+    let broad = |s: f64| broad_texture(w, h, s);
+    let (clean, clean_err) = measure(&fine, 0.0);
+    let (noisy_fine, noisy_err) = measure(&fine, 12.0);
+    let (noisy_broad, noisy_broad_err) = measure(&broad, 12.0);
+    // Measured: sigma 0.030, 0.058 and 0.160 px; errors 0.041, 0.089 and 0.615 px.
+    assert!(
+        noisy_fine > 1.5 * clean,
+        "noise: {clean} -> {noisy_fine} px"
+    );
+    assert!(
+        noisy_broad > 2.0 * noisy_fine,
+        "breadth: {noisy_fine} -> {noisy_broad} px"
+    );
+    assert!(
+        noisy_err > 1.5 * clean_err && noisy_broad_err > 2.0 * noisy_err,
+        "errors {clean_err} {noisy_err} {noisy_broad_err} px"
+    );
+    for (s, e) in [
+        (clean, clean_err),
+        (noisy_fine, noisy_err),
+        (noisy_broad, noisy_broad_err),
+    ] {
+        assert!(
+            e > 0.5 * s && e < 5.0 * s,
+            "error {e} px against sigma {s} px"
+        );
+    }
+    // A search along the row measures x only: y takes its value.
+    let (left, right) = (texture(w, h, 0.0), texture(w, h, 10.37));
+    let (li, ri) = (view(&left, w, h), view(&right, w, h));
+    let mut tpl = [0f32; refine::TEMPLATE_LEN];
+    refine::sample_template(&li, [60.0, 30.0], 4, &mut tpl).unwrap();
+    let p = refine::correlate(&tpl, 4, &ri, [50.0, 30.0], (2, 0), 0.5).unwrap();
+    assert!(p.sigma[0] > 0.0 && p.sigma[1] == p.sigma[0], "{p:?}");
 }
