@@ -2,11 +2,12 @@
 """Does a correlation peak know its own precision? The stereo observations of a run
 against rendered truth, grouped by the precision their NCC peak gives.
 
-The traverse weights each image observation by the precision of the correlation that
-measured it (`docs/traverse.md`, "Observation weights from the correlation peak"): a
-parabola through the NCC peak `rho` and its neighbours has the curvature `c` (per pixel
-squared), and `sigma^2 = (1 - rho) / (n c)` over the template's `n` samples. This script
-recomputes that figure for every stereo observation of a run's COLMAP model (a 9x9
+The traverse weights each right-image observation by the precision of the stereo
+correlation that measured it, the left ones keeping `sigma_px` (`docs/traverse.md`,
+"Observation weights from the correlation peak"): a parabola through the NCC peak `rho`
+and its neighbours has the curvature `c` (per pixel squared), and
+`sigma^2 = (1 - rho) / (n c)` over the template's `n` samples. This script recomputes
+that figure for every stereo observation of a run's COLMAP model (a 9x9
 template around the left position, bilinear, against the right image at the observed
 right position and one pixel either side along the row) and sets it beside the
 observation's disparity error against the depth map (as `precision.py` does: rectified
@@ -128,8 +129,11 @@ def temporal(dataset, images, depths, poses, f, cx, cy):
 
 def table(name, key, errors, edges):
     print(f"{name}: observations, error robust sd / RMS within 1.5 px (px), beyond 0.5 px")
-    for lo, hi in zip(edges[:-1], edges[1:]):
-        e = errors[(key >= lo) & (key <= hi)]
+    last = len(edges) - 2
+    for i, (lo, hi) in enumerate(zip(edges[:-1], edges[1:])):
+        # Each value in one bin: the upper edge belongs to the next, except the last's.
+        inside = (key >= lo) & ((key <= hi) if i == last else (key < hi))
+        e = errors[inside]
         if len(e) == 0:
             continue
         mad = 1.4826 * np.median(np.abs(e - np.median(e)))
@@ -167,7 +171,7 @@ def main():
     if len(errors) == 0:
         sys.exit("no stereo observation with a depth")
     table("by the peak's sigma (fifths)", sigmas, errors, np.quantile(sigmas, np.linspace(0, 1, 6)))
-    table("by the peak's NCC", scores, errors, np.array([-1.0, 0.9, 0.95, 0.98, 1.0]))
+    table("by the peak's NCC", scores, errors, np.array([-1.0, 0.9, 0.95, 0.98, np.inf]))
     rows = temporal(dataset, images, depths, poses, f, cx, cy)
     if len(rows) == 0:
         return

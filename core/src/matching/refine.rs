@@ -46,10 +46,11 @@ pub struct Peak {
     pub sigma: [f32; 2],
 }
 
-/// Curvature (per pixel squared) below which a peak counts as flat in
-/// [`Peak`]'s precision, and the smallest `1 - rho` it uses: a perfect match still
-/// errs by its sampling.
+/// Curvature (per pixel squared) below which a peak counts as flat in [`Peak`]'s
+/// precision.
 const MIN_CURVATURE: f32 = 1e-4;
+/// The smallest `1 - rho` [`Peak`]'s precision uses: a perfect match still errs by its
+/// sampling.
 const MIN_MISMATCH: f32 = 1e-4;
 
 /// The standard deviation (pixels) of a parabola's vertex through `(-1, a)`,

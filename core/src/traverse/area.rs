@@ -124,7 +124,7 @@ impl Traverse<'_> {
                 continue;
             };
             let l = recentre(&tpl, half, left, found, (1, 1), rcfg.min_ncc).at;
-            let Ok(r) = refine_checked(left, right, l, pr, &rcfg) else {
+            let Ok(right_peak) = refine_checked(left, right, l, pr, &rcfg) else {
                 continue;
             };
             let duplicate = self.matcher.tie_points().any(|t| near(t.cur.left, l))
@@ -137,8 +137,8 @@ impl Traverse<'_> {
                 tag: info.tag,
                 point: info.point,
                 left: l,
-                right: r.at,
-                right_sigma: r.sigma,
+                right: right_peak.at,
+                right_sigma: right_peak.sigma,
             };
             self.n_area += 1;
         }

@@ -39,7 +39,7 @@ pub const TURN_SAMPLES: u32 = 64;
 /// Tie points per epoch at most (the spreading keeps the best spread ones).
 pub const MAX_TIE_POINTS: usize = 400;
 /// SIFT pending candidates per image column, over [`PENDING_SCALE`]: 1152 at 640 px,
-/// 576 at 320 px. The rendered streets' poses came out the same to the byte as with
+/// 576 at 320 px (`docs/configuration.md`, "Capacities"). The rendered streets' poses came out the same to the byte as with
 /// 2048 and 1024 (`bench/traverse/README.md`, "Observation weights from the
 /// correlation peak"): no candidate waits beyond these there. The bytes saved pay for
 /// the right positions' precision at 320x240.
@@ -67,6 +67,10 @@ pub struct TraverseConfig {
     pub resection: ResectionConfig,
     /// Standard deviation of an image measurement, pixels (weights of the adjustment).
     pub sigma_px: f64,
+    /// Weight each right-image observation by the precision of its stereo correlation
+    /// peak, relative to `sigma_px` (see `solve::observation_sigma_px`); `false`
+    /// weights every observation with `sigma_px`, as the seeds' procedures do.
+    pub peak_weights: bool,
     /// Fewer tie points than this and the epoch is flagged and tied to its prediction.
     pub min_tie_points: usize,
     /// Smallest ray angle of a new tie point, radians.
@@ -223,6 +227,7 @@ impl TraverseConfig {
             adjust,
             resection: ResectionConfig::default(),
             sigma_px: TRAVERSE_SIGMA_PX,
+            peak_weights: true,
             min_tie_points: 12,
             min_ray_angle_rad: 0.05f64.to_radians(),
             // Far points carry the attitude; only points at practically infinite
@@ -530,9 +535,11 @@ impl TraverseConfig {
         if mode == TraverseMode::Window {
             return self;
         }
-        // The seeds' procedures drop a leaving epoch's observations with it and hold
-        // the calibration as given (unless it is estimated freely).
+        // The seeds' procedures drop a leaving epoch's observations with it, weight
+        // every observation alike and hold the calibration as given (unless it is
+        // estimated freely).
         self.adjust.fixed_epochs = 0;
+        self.peak_weights = false;
         if self.calibration_check.is_some() {
             self = self.with_calibration_check(None);
         }
@@ -601,6 +608,8 @@ mod mode_tests {
         assert!(b.calibration_check.is_some() && b.adjust.estimate_rig);
         assert!(c.calibration_check.is_none() && !c.adjust.estimate_rig);
         assert_eq!((c.sift, c.sigma_px), (b.sift, b.sigma_px));
+        // The seeds weight every observation alike.
+        assert!(b.peak_weights && !c.peak_weights);
     }
 
     #[test]
@@ -610,6 +619,7 @@ mod mode_tests {
         assert_eq!(c.adjust.window, 7);
         assert_eq!(c.matching.track_history, 7);
         assert_eq!(c.adjust.fixed_epochs, 0);
+        assert!(!c.peak_weights);
         assert_eq!(c.adjust.robust, Robust::None);
         assert_eq!(c.adjust.max_iterations, 20);
         // Table 14: base variance 0.001 m^2, velocity variance 0.5 m^2/s^2.

@@ -64,14 +64,18 @@ pub const TRAVERSE_VELOCITY_SIGMA: f64 = 2.0;
 /// it (docs/adjustment.md, Quality).
 pub const TRAVERSE_SIGMA_PX: f64 = 0.5;
 
-/// The model of a right-image observation's sigma from its stereo correlation peak
-/// (`solve::observation_sigma_px`): `sqrt(FLOOR^2 + (GAIN x peak)^2)` pixels, scaled so
-/// that [`TRAVERSE_SIGMA_PX`] stands for an observation modelled at
-/// `TYPICAL_PEAK_SIGMA_PX`. Fitted to the disparity errors of rendered streets against
-/// their depth maps (`bench/traverse/README.md`, "Observation weights from the
-/// correlation peak"): the floor is what the sharpest peaks still err by, the gain
-/// what the peak's own figure underestimates by. A gain of 4 (weights spread 25-fold)
-/// did worse on three scenes of six than this 2.
+// The model of a right-image observation's sigma from its stereo correlation peak
+// (`solve::observation_sigma_px`): `sqrt(FLOOR^2 + (GAIN x peak)^2)` pixels, scaled so
+// that `TRAVERSE_SIGMA_PX` stands for an observation modelled at `TYPICAL_PEAK_SIGMA_PX`.
+// Fitted to the disparity errors of rendered streets against their depth maps
+// (`bench/traverse/README.md`, "Observation weights from the correlation peak").
+
+/// What the sharpest peaks still err by, pixels: the model's floor.
 pub const PEAK_SIGMA_FLOOR_PX: f64 = 0.05;
+/// What the peak's own figure underestimates the error by. A gain of 4 with a floor of
+/// 0.04 px (weights spread 25-fold, both images weighted) did worse on three scenes of
+/// five.
 pub const PEAK_SIGMA_GAIN: f64 = 2.0;
+/// The modelled sigma (pixels) of an observation that `TRAVERSE_SIGMA_PX` stands for:
+/// about the median, so the weights' level stays where the constraints were tuned.
 pub const TYPICAL_PEAK_SIGMA_PX: f64 = 0.08;

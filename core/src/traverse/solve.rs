@@ -331,6 +331,7 @@ fn observation(
     let interior = cfg.rig.interior(camera);
     let xy = interior.pixel_to_corrected(px[0] as f64, px[1] as f64);
     let [sx, sy] = interior.pixel_size_mm;
+    let sigma = if cfg.peak_weights { sigma } else { [0.0; 2] };
     let [wx, wy] = sigma.map(|s| observation_sigma_px(cfg.sigma_px, s));
     let weight = [1.0 / (wx * sx * wx * sx), 1.0 / (wy * sy * wy * sy)];
     let mut o = Observation::new(epoch, camera, point, xy, weight);
@@ -376,6 +377,8 @@ pub(super) fn add_stereo_observations(
     obs: StereoPx,
     tag: u32,
 ) {
+    // The left observations are not weighted by their temporal peaks (see
+    // `observation_sigma_px`): they pass "not measured".
     for (cam, px) in [
         (Camera::Left, (obs.left, [0.0; 2])),
         (Camera::Right, (obs.right, obs.right_sigma)),
@@ -423,4 +426,33 @@ pub(super) fn new_point(
     let point = window.add_point(xyz).ok()?;
     add_stereo_observations(cfg, window, prev_id, point, obs, tag);
     Some(point)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::observation_sigma_px;
+    use crate::traverse::defaults::{PEAK_SIGMA_FLOOR_PX, PEAK_SIGMA_GAIN, TYPICAL_PEAK_SIGMA_PX};
+
+    #[test]
+    fn an_observation_sigma_follows_its_peak_from_the_floor_up() {
+        let base = 0.5;
+        // Not measured, or nonsense: the configured sigma.
+        for s in [0.0, -1.0, f32::NAN, f32::INFINITY] {
+            assert_eq!(observation_sigma_px(base, s), base, "{s}");
+        }
+        // A peak modelled at the typical precision gets the configured sigma.
+        let floor2 = PEAK_SIGMA_FLOOR_PX * PEAK_SIGMA_FLOOR_PX;
+        let typical =
+            (TYPICAL_PEAK_SIGMA_PX * TYPICAL_PEAK_SIGMA_PX - floor2).sqrt() / PEAK_SIGMA_GAIN;
+        assert!((observation_sigma_px(base, typical as f32) - base).abs() < 1e-6);
+        // The sharpest peak is held at the floor; flatter ones weigh less and less.
+        let sharpest = observation_sigma_px(base, 1e-9);
+        assert!((sharpest - base * PEAK_SIGMA_FLOOR_PX / TYPICAL_PEAK_SIGMA_PX).abs() < 1e-9);
+        let mut last = sharpest;
+        for s in [0.005f32, 0.01, 0.02, 0.05, 0.2] {
+            let now = observation_sigma_px(base, s);
+            assert!(now > last && now.is_finite(), "{s}: {now} after {last}");
+            last = now;
+        }
+    }
 }
