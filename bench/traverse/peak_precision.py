@@ -39,7 +39,7 @@ from steps import read_poses
 # The traverse's template: half-size 4 (`RefineConfig::half_window`).
 HALF = 4
 N = (2 * HALF + 1) ** 2
-# Floors of the precision's two figures, as `matching::refine::vertex_sigma`.
+# Floors of the precision's two figures, as `matching::refine::vertex`.
 MIN_CURVATURE = 1e-4
 MIN_MISMATCH = 1e-4
 
@@ -67,41 +67,40 @@ def ncc(t, p):
     return (t * p).sum() / d if d > 0 else -1.0
 
 
+def scores(template_img, at_template, img, centre, offsets):
+    """NCC of the template around `at_template` in `template_img` with `img` at `centre`
+    plus each of `offsets` (pixels); None near a border."""
+    tpl = patch(template_img, *at_template)
+    if tpl is None:
+        return None
+    out = []
+    for dx, dy in offsets:
+        p = patch(img, centre[0] + dx, centre[1] + dy)
+        if p is None:
+            return None
+        out.append(ncc(tpl, p))
+    return out
+
+
+def vertex_sigma(a, b, c):
+    """The sigma (pixels) of a parabola's vertex through the scores `a`, `b` (the peak),
+    `c`: `matching::refine::vertex`."""
+    curvature = max(2 * b - a - c, MIN_CURVATURE)
+    return np.sqrt(max(1 - b, MIN_MISMATCH) / (N * curvature))
+
+
 def peak(left_img, right_img, left, right):
     """NCC at the right position and a pixel either side along the left row: the
     peak's score and its sigma (pixels); None near the border."""
-    tpl = patch(left_img, *left)
-    if tpl is None:
-        return None
-    scores = []
-    for dx in (-1, 0, 1):
-        p = patch(right_img, right[0] + dx, left[1])
-        if p is None:
-            return None
-        scores.append(ncc(tpl, p))
-    a, b, c = scores
-    curvature = max(2 * b - a - c, MIN_CURVATURE)
-    return b, np.sqrt(max(1 - b, MIN_MISMATCH) / (N * curvature))
+    s = scores(left_img, left, right_img, (right[0], left[1]), [(-1, 0), (0, 0), (1, 0)])
+    return None if s is None else (s[1], vertex_sigma(*s))
 
 
 def temporal_peak(before_img, img, before, at):
     """The sigma (pixels; x, y) of the peak of the template at `before` in
     `before_img` against `img` at `at` and a pixel either side on each axis."""
-    tpl = patch(before_img, *before)
-    if tpl is None:
-        return None
-    score = {}
-    for d in [(0, 0), (-1, 0), (1, 0), (0, -1), (0, 1)]:
-        p = patch(img, at[0] + d[0], at[1] + d[1])
-        if p is None:
-            return None
-        score[d] = ncc(tpl, p)
-    b = score[(0, 0)]
-    sigma = []
-    for lo, hi in [((-1, 0), (1, 0)), ((0, -1), (0, 1))]:
-        curvature = max(2 * b - score[lo] - score[hi], MIN_CURVATURE)
-        sigma.append(np.sqrt(max(1 - b, MIN_MISMATCH) / (N * curvature)))
-    return sigma
+    s = scores(before_img, before, img, at, [(-1, 0), (0, 0), (1, 0), (0, -1), (0, 1)])
+    return None if s is None else [vertex_sigma(*s[:3]), vertex_sigma(s[3], s[1], s[4])]
 
 
 def temporal(dataset, images, depths, poses, f, cx, cy):

@@ -53,14 +53,6 @@ const MIN_CURVATURE: f32 = 1e-4;
 /// sampling.
 const MIN_MISMATCH: f32 = 1e-4;
 
-/// The standard deviation (pixels) of a parabola's vertex through `(-1, a)`,
-/// `(0, b)`, `(1, c)` of NCC scores over `cnt` samples ([`Peak`]).
-#[inline]
-fn vertex_sigma(a: f32, b: f32, c: f32, cnt: f32) -> f32 {
-    let curvature = (2.0 * b - a - c).max(MIN_CURVATURE);
-    libm::sqrtf((1.0 - b).max(MIN_MISMATCH) / (cnt * curvature))
-}
-
 /// [`refine_match`], then the left-right check of [`RefineConfig::back_check_px`].
 ///
 /// On a rectified rig (`rows_only`) the position returned is then re-centred
@@ -178,15 +170,20 @@ fn inside(img: &ImageView<'_>, x: f32, y: f32, margin: f32) -> bool {
         && y + margin < (img.height() - 1) as f32
 }
 
-/// Sub-pixel vertex of a parabola through `(-1, a)`, `(0, b)`, `(1, c)` (b the maximum).
+/// The vertex of a parabola through the NCC scores `(-1, a)`, `(0, b)`, `(1, c)` (b the
+/// maximum) over `cnt` samples: its sub-pixel offset and the offset's standard
+/// deviation in pixels ([`Peak`]), both from the parabola's curvature.
 #[inline]
-fn parabola(a: f32, b: f32, c: f32) -> f32 {
+fn vertex(a: f32, b: f32, c: f32, cnt: f32) -> (f32, f32) {
     let den = a - 2.0 * b + c;
-    if den < -1e-9 {
+    let offset = if den < -1e-9 {
         (0.5 * (a - c) / den).clamp(-0.5, 0.5)
     } else {
         0.0
-    }
+    };
+    let curvature = (-den).max(MIN_CURVATURE);
+    let sigma = libm::sqrtf((1.0 - b).max(MIN_MISMATCH) / (cnt * curvature));
+    (offset, sigma)
 }
 
 /// Refines the right position `right` of the left point `left`: the refined right
@@ -587,12 +584,9 @@ pub fn correlate(
         return Err(RefineError::PeakOnEdge);
     }
     let at = |x: usize, y: usize| score[y * S + x];
-    let (left, right) = (at(bx - 1, by), at(bx + 1, by));
-    let dx = parabola(left, peak, right);
-    let sx = vertex_sigma(left, peak, right, cnt);
+    let (dx, sx) = vertex(at(bx - 1, by), peak, at(bx + 1, by), cnt);
     let (dy, sy) = if ry > 0 {
-        let (up, down) = (at(bx, by - 1), at(bx, by + 1));
-        (parabola(up, peak, down), vertex_sigma(up, peak, down, cnt))
+        vertex(at(bx, by - 1), peak, at(bx, by + 1), cnt)
     } else {
         (0.0, sx)
     };

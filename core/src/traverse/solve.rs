@@ -331,7 +331,6 @@ fn observation(
     let interior = cfg.rig.interior(camera);
     let xy = interior.pixel_to_corrected(px[0] as f64, px[1] as f64);
     let [sx, sy] = interior.pixel_size_mm;
-    let sigma = if cfg.peak_weights { sigma } else { [0.0; 2] };
     let [wx, wy] = sigma.map(|s| observation_sigma_px(cfg.sigma_px, s));
     let weight = [1.0 / (wx * sx * wx * sx), 1.0 / (wy * sy * wy * sy)];
     let mut o = Observation::new(epoch, camera, point, xy, weight);
@@ -378,10 +377,15 @@ pub(super) fn add_stereo_observations(
     tag: u32,
 ) {
     // The left observations are not weighted by their temporal peaks (see
-    // `observation_sigma_px`): they pass "not measured".
+    // `observation_sigma_px`), nor any in the seed modes: they pass "not measured".
+    let right_sigma = if cfg.peak_weights {
+        obs.right_sigma
+    } else {
+        [0.0; 2]
+    };
     for (cam, px) in [
         (Camera::Left, (obs.left, [0.0; 2])),
-        (Camera::Right, (obs.right, obs.right_sigma)),
+        (Camera::Right, (obs.right, right_sigma)),
     ] {
         let _ = window.add_observation(observation(cfg, (id, cam), point, px, tag));
     }
