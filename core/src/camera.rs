@@ -581,7 +581,19 @@ pub fn project_with_jacobians(
     focal_mm: f64,
     point: &[f64; 3],
 ) -> Result<Projection, CameraError> {
-    let (m, dm) = rotation_with_derivatives(pose.omega, pose.phi, pose.kappa);
+    let rotation = rotation_with_derivatives(pose.omega, pose.phi, pose.kappa);
+    project_with_rotation(pose, rotation, focal_mm, point)
+}
+
+/// [`project_with_jacobians`] with the pose's rotation `M` and its derivatives by any
+/// three attitude parameters (the angles, or an adjustment's own), which `d_pose`'s
+/// first three columns then follow.
+pub fn project_with_rotation(
+    pose: &Pose,
+    (m, dm): (Matrix3<f64>, [Matrix3<f64>; 3]),
+    focal_mm: f64,
+    point: &[f64; 3],
+) -> Result<Projection, CameraError> {
     let d = Vector3::from(*point) - pose.centre_vec();
     let uvw = m * d;
     let (u, v, w) = (uvw[0], uvw[1], uvw[2]);

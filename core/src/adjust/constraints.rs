@@ -8,7 +8,9 @@
 //! are added straight to the reduced camera system.
 //!
 //! - Pose prior (datum of the first epoch, or the prior carried by the sliding
-//!   window): `x_e - x_prior`, identity Jacobian, full 6x6 information.
+//!   window): the turn from the prior's attitude to the epoch's
+//!   ([`super::attitude::residual`]) and `C_e - C_prior`, identity Jacobian in the
+//!   window's unknowns, full 6x6 information.
 //! - Relative orientation prior (rig estimated): `rig - rig_prior`.
 //! - Base length (seed 000 eq. 44): `|C_R - C_L| - B`. With the right camera
 //!   following the rig, `C_R - C_L = M_L^T b` and the rotation keeps lengths, so
@@ -24,7 +26,7 @@
 
 use nalgebra::Vector3;
 
-use crate::camera::rotation_with_derivatives;
+use super::attitude::{self, with_turn_derivatives};
 
 /// Wraps an angle difference into `(-pi, pi]`.
 pub fn wrap_angle(a: f64) -> f64 {
@@ -50,6 +52,20 @@ pub fn prior_residual(params: &[f64; 6], prior: &[f64; 6]) -> [f64; 6] {
     r
 }
 
+/// Residual of an epoch's pose prior in the window's unknowns: the object-frame turn
+/// from the prior's attitude to the pose's, then the centre's difference.
+pub fn pose_prior_residual(params: &[f64; 6], prior: &[f64; 6]) -> [f64; 6] {
+    let [a, b, c] = attitude::residual(params, prior);
+    [
+        a,
+        b,
+        c,
+        params[3] - prior[3],
+        params[4] - prior[4],
+        params[5] - prior[5],
+    ]
+}
+
 /// Base length residual `|b| - length` and its gradient with respect to `b`.
 pub fn base_length(b: &[f64; 3], length: f64) -> (f64, [f64; 3]) {
     let n = libm::sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
@@ -69,10 +85,11 @@ pub fn distance(c0: &[f64; 3], c1: &[f64; 3], d: f64) -> (f64, [f64; 3]) {
 /// Smoothness residual (change of velocity in the camera frame, m/s) of three
 /// epochs' parameters `[omega, phi, kappa, X0, Y0, Z0]` at intervals
 /// `dt0 = t1 - t0`, `dt1 = t2 - t1`, with its Jacobian: one row per camera axis, over
-/// the three epochs' six parameters (the last epoch's angles do not enter).
+/// the three epochs' unknowns (turn and centre, as the window solves for them; the last
+/// epoch's attitude does not enter).
 pub fn smoothness(p: [&[f64; 6]; 3], dt0: f64, dt1: f64) -> ([f64; 3], [[f64; 18]; 3]) {
-    let (m0, dm0) = rotation_with_derivatives(p[0][0], p[0][1], p[0][2]);
-    let (m1, dm1) = rotation_with_derivatives(p[1][0], p[1][1], p[1][2]);
+    let (m0, dm0) = with_turn_derivatives(p[0][0], p[0][1], p[0][2]);
+    let (m1, dm1) = with_turn_derivatives(p[1][0], p[1][1], p[1][2]);
     let centre = |e: usize| Vector3::new(p[e][3], p[e][4], p[e][5]);
     // Velocities over the two intervals, in the object frame.
     let v0 = (centre(1) - centre(0)) / dt0;

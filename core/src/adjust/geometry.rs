@@ -105,16 +105,29 @@ pub fn project_rig(
     )
 }
 
-/// A rotation `M` and its derivatives by omega, phi, kappa, packed column-major
-/// (`[M, dM/dw, dM/dp, dM/dk]`, 9 values each) so a window can cache them per
-/// epoch: the sines and matrix products cost more than the projection itself.
+/// A rotation `M` and its derivatives by three parameters (the angles, or the
+/// window's turn), packed column-major (`[M, dM/d1, dM/d2, dM/d3]`, 9 values each) so
+/// a window can cache them per epoch: the sines and matrix products cost more than
+/// the projection itself.
 #[repr(transparent)]
 #[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Rotations(pub [f64; 36]);
 
 impl Rotations {
+    /// `M` and its derivatives by omega, phi and kappa (the rig's relative angles).
     pub fn new(omega: f64, phi: f64, kappa: f64) -> Self {
         let (m, d) = rotation_with_derivatives(omega, phi, kappa);
+        Self::pack(&m, &d)
+    }
+
+    /// `M` and its derivatives by the object-frame turn of [`super::attitude`], the
+    /// window's attitude unknowns.
+    pub fn with_turn(omega: f64, phi: f64, kappa: f64) -> Self {
+        let (m, d) = super::attitude::with_turn_derivatives(omega, phi, kappa);
+        Self::pack(&m, &d)
+    }
+
+    fn pack(m: &Matrix3<f64>, d: &[Matrix3<f64>; 3]) -> Self {
         let mut out = [0.0; 36];
         out[..9].copy_from_slice(m.as_slice());
         for k in 0..3 {

@@ -12,6 +12,8 @@
 //!   analytic Jacobians (chain rule through the relative orientation).
 //! - `intersection`: linear intersection of two or more rays (seed 000, §5.4).
 //! - `resection`: P3P (Grunert) in a deterministic RANSAC, then least squares.
+//! - `attitude`: the adjustment's attitude unknowns, a small turn in the object frame
+//!   (regular where the angles' corrections are not, at phi = +-90 deg).
 //! - `cholesky`: in-place Cholesky factorisation, solve and inverse.
 //! - `constraints`: datum/prior, base length, relative orientation prior,
 //!   motion smoothness, odometer distance, GNSS position.
@@ -32,6 +34,7 @@
     clippy::type_complexity
 )]
 
+pub(crate) mod attitude;
 pub(crate) mod cholesky;
 pub(crate) mod constraints;
 pub mod geometry;

@@ -16,14 +16,29 @@ pub fn rigid_transport(from: &[f64; 6], to: &[f64; 6]) -> [f64; 36] {
     let e_to_inv = angle_rates(to)
         .try_inverse()
         .unwrap_or_else(Matrix3::identity);
-    let a = e_to_inv * e_from;
-    let d = Vector3::new(to[3] - from[3], to[4] - from[4], to[5] - from[5]);
-    let lever = -d.cross_matrix() * e_from;
+    transport(e_to_inv * e_from, -lever(from, to) * e_from)
+}
+
+/// [`rigid_transport`] in the window's unknowns ([`super::attitude`]: the object-frame
+/// turn, then the centre): the turn carries over as it is, and moves the centre by
+/// `-[C_to - C_from]x`.
+pub fn rigid_transport_turn(from: &[f64; 6], to: &[f64; 6]) -> [f64; 36] {
+    transport(Matrix3::identity(), -lever(from, to))
+}
+
+/// `[C_to - C_from]x`.
+fn lever(from: &[f64; 6], to: &[f64; 6]) -> Matrix3<f64> {
+    Vector3::new(to[3] - from[3], to[4] - from[4], to[5] - from[5]).cross_matrix()
+}
+
+/// The 6x6 (row-major) with the attitude block `a`, the centre's block `c` under the
+/// attitude and the identity for the centre.
+fn transport(a: Matrix3<f64>, c: Matrix3<f64>) -> [f64; 36] {
     let mut j = [0.0; 36];
     for r in 0..3 {
-        for c in 0..3 {
-            j[r * 6 + c] = a[(r, c)];
-            j[(r + 3) * 6 + c] = lever[(r, c)];
+        for k in 0..3 {
+            j[r * 6 + k] = a[(r, k)];
+            j[(r + 3) * 6 + k] = c[(r, k)];
         }
         j[(r + 3) * 6 + r + 3] = 1.0;
     }

@@ -12,7 +12,9 @@
 //! Levenberg-Marquardt damping) on the six parameters over the inliers.
 //! Nothing is allocated: inlier status is recomputed from the pose.
 
-use crate::camera::{project, project_with_jacobians, rigid_fit, Pose};
+use super::attitude;
+use super::propagation::standard_deviations;
+use crate::camera::{project, project_with_rotation, rigid_fit, Pose};
 use nalgebra::{Matrix3, Matrix6, Vector3, Vector6};
 
 /// An object point and its corrected photo-coordinates (mm) in the camera.
@@ -391,7 +393,8 @@ pub fn resect(
     }
 }
 
-/// Least-squares refinement over the inliers of `pose` (damped Gauss-Newton).
+/// Least-squares refinement over the inliers of `pose` (damped Gauss-Newton), its
+/// attitude unknowns a turn in the object frame as the window's ([`attitude`]).
 pub fn refine(
     mut pose: Pose,
     corr: &[Correspondence],
@@ -424,7 +427,9 @@ pub fn refine(
         normal = Matrix6::zeros();
         let mut g = Vector6::zeros();
         for c in corr.iter().filter(|c| member(c)) {
-            let Ok(pr) = project_with_jacobians(&pose, focal_mm, &c.point) else {
+            let (w, p, k) = (pose.omega, pose.phi, pose.kappa);
+            let rotation = attitude::with_turn_derivatives(w, p, k);
+            let Ok(pr) = project_with_rotation(&pose, rotation, focal_mm, &c.point) else {
                 continue;
             };
             for k in 0..2 {
@@ -443,7 +448,8 @@ pub fn refine(
         };
         let dx = ch.solve(&g);
         let mut p = pose.to_params();
-        for i in 0..6 {
+        attitude::turn(&mut p, [dx[0], dx[1], dx[2]]);
+        for i in 3..6 {
             p[i] += dx[i];
         }
         let cand = Pose::from_params(&p);
@@ -465,11 +471,14 @@ pub fn refine(
     }
     let dof = (2 * mask_count).saturating_sub(6).max(1);
     let s02 = cost / dof as f64;
-    let cov = normal.cholesky().ok_or(ResectionError::Singular)?.inverse();
-    let mut std = [0.0; 6];
-    for (i, s) in std.iter_mut().enumerate() {
-        *s = libm::sqrt((s02 * cov[(i, i)]).max(0.0));
+    let cov = normal.cholesky().ok_or(ResectionError::Singular)?.inverse() * s02;
+    let mut turn_cov = [0.0; 36];
+    for r in 0..6 {
+        for c in 0..6 {
+            turn_cov[r * 6 + c] = cov[(r, c)];
+        }
     }
+    let std = standard_deviations(&attitude::to_angles(&pose.to_params(), &turn_cov));
     Ok(ResectionResult {
         pose,
         inliers: mask_count,

@@ -77,8 +77,9 @@ pub struct TraverseConfig {
     pub min_ray_angle_rad: f64,
     /// New tie points farther than this from the camera are not added, metres.
     pub max_depth_m: f64,
-    /// Prior standard deviations (angles rad, positions m) tying an epoch that the images
-    /// do not determine (lost track) to its motion prediction.
+    /// Prior standard deviations (the attitude's turn about the object axes, rad;
+    /// positions m) tying an epoch that the images do not determine (lost track) to its
+    /// motion prediction.
     pub prediction_sigmas: [f64; 6],
     /// Refine each tie point's current left position against the previous epoch's
     /// template (needs `matching.refine`; see `traverse::patches`).

@@ -158,7 +158,8 @@ impl<'a> Window<'a> {
     }
 
     /// A prior on an epoch's pose (object coordinates) with standard
-    /// deviations (angles rad, positions m); replaces any earlier prior.
+    /// deviations (the attitude's turn about the object axes, rad; positions m);
+    /// replaces any earlier prior.
     pub fn set_pose_prior(
         &mut self,
         epoch: u32,

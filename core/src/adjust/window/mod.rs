@@ -1,8 +1,10 @@
 //! The sliding-window bundle adjuster.
 //!
-//! Unknowns: the left camera's `(omega, phi, kappa, X, Y, Z)` of every epoch in
-//! the window, optionally the relative orientation of the rig
-//! `(omega, phi, kappa, bx, by, bz)` with a prior, and the tie points. The
+//! Unknowns: the left camera's attitude, as a small turn in the object frame
+//! ([`super::attitude`]: the angles' corrections are singular where a vehicle heads
+//! a quarter turn from the datum), and its centre `(X, Y, Z)`, of every epoch in the
+//! window; optionally the relative orientation of the rig `(omega, phi, kappa, bx, by,
+//! bz)` with a prior; and the tie points. The
 //! normal equations are built point by point: each point's 3x3 block `V` is
 //! eliminated at once (Schur complement), so only the reduced camera system
 //! `S = U - W V^-1 W^T` (at most `6 (N + 1)` square) is stored; it is damped
@@ -21,13 +23,14 @@
 //!
 //! All storage comes from the [`Arena`], sized by [`AdjustConfig::budget`].
 
+use super::attitude;
 use super::cholesky;
-use super::constraints::{base_length, distance, prior_residual, smoothness};
+use super::constraints::{base_length, distance, pose_prior_residual, prior_residual, smoothness};
 use super::geometry::{
     corrected_focal, project_epoch, project_xy, project_xy_with, right_rotation,
     shift_principal_point, with_interior, EpochRotations, InteriorCorrections, Partials, Rotations,
 };
-use super::propagation::{propagate, rigid_transport, standard_deviations};
+use super::propagation::{propagate, rigid_transport_turn, standard_deviations};
 use super::quality::ChiSquareTest;
 use super::weighting::{cauchy_factor, median_by_rank, CHI2_2_MEDIAN, SEED_REWEIGHT};
 use crate::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget, OutOfMemory};
@@ -377,7 +380,9 @@ impl Observation {
 struct EpochSlot {
     params: [f64; 6],
     prior: [f64; 6],
+    /// Information of the prior in the window's unknowns (turn and centre).
     prior_info: [f64; 36],
+    /// Covariance of the last solution in the window's unknowns (turn and centre).
     cov: [f64; 36],
     gnss: [f64; 3],
     gnss_sigma: f64,
@@ -434,7 +439,8 @@ struct FixedSlot {
     right: [f64; 9],
     /// Time of the epoch, seconds (the motion smoothness across the window's edge).
     time: f64,
-    /// Covariance of `params` with respect to the datum ([`Window::epoch_absolute_covariance`]).
+    /// Covariance with respect to the datum ([`Window::epoch_absolute_covariance`]), in
+    /// the window's unknowns (turn and centre).
     cov: [f64; 36],
 }
 
@@ -704,7 +710,7 @@ fn carry_prior(
 }
 
 /// The GNSS residual `C + M^T l - G` of an epoch (local coordinates) and its
-/// Jacobian with respect to the pose (`[coordinate][omega, phi, kappa, X, Y, Z]`: the
+/// Jacobian with respect to the pose (`[coordinate][turn x, y, z, X, Y, Z]`: the
 /// lever arm's turn, then the identity). Uses the epoch's cached rotation.
 fn gnss_residual(ep: &EpochSlot) -> ([f64; 3], [[f64; 6]; 3]) {
     let l = ep.gnss_lever;

@@ -92,7 +92,7 @@ impl<'a> Window<'a> {
         let a = self.rig.angles;
         self.rig_rot = Rotations::new(a[0], a[1], a[2]);
         for e in self.epochs[..self.n_epochs].iter_mut() {
-            e.rot = Rotations::new(e.params[0], e.params[1], e.params[2]);
+            e.rot = Rotations::with_turn(e.params[0], e.params[1], e.params[2]);
             e.right = right_rotation(&e.rot, &self.rig_rot);
         }
         for e in self.fixed[..self.n_fixed].iter_mut() {
@@ -305,8 +305,11 @@ impl<'a> Window<'a> {
         cholesky::solve(&self.reduced[..nc * nc], nc, &mut self.rhs[..nc]);
         self.back_substitute(lambda);
         for e in 0..self.n_epochs {
-            for i in 0..6 {
-                self.epochs[e].params[i] += self.rhs[6 * e + i];
+            let d = &self.rhs[6 * e..6 * e + 6];
+            let p = &mut self.epochs[e].params;
+            attitude::turn(p, [d[0], d[1], d[2]]);
+            for i in 3..6 {
+                p[i] += d[i];
             }
         }
         if let Some(rb) = rig_block {
@@ -505,7 +508,7 @@ impl<'a> Window<'a> {
             if ep.flags & EP_PRIOR == 0 {
                 continue;
             }
-            let r = prior_residual(&ep.params, &ep.prior);
+            let r = pose_prior_residual(&ep.params, &ep.prior);
             count += 6;
             cost += self.block_prior(normal, e, &r, &ep.prior_info);
         }

@@ -37,17 +37,21 @@ impl<'a> Window<'a> {
     /// by. Each fixed epoch keeps the absolute covariance it left with, so the
     /// uncertainty of a traverse without fixes accumulates step by step, as it should.
     pub fn epoch_absolute_covariance(&self, i: usize) -> Option<[f64; 36]> {
-        let cov = self.epoch_covariance(i)?;
-        Some(self.plus_anchor(i, cov))
+        let cov = self.turn_covariance(i)?;
+        Some(attitude::to_angles(
+            &self.epochs[i].params,
+            &self.plus_anchor(i, cov),
+        ))
     }
 
     /// `cov` (of slot `i`, relative to the fixed epochs) plus the newest fixed epoch's
-    /// absolute covariance carried rigidly to the slot: `cov + J C_a J^T`.
+    /// absolute covariance carried rigidly to the slot: `cov + J C_a J^T`, in the
+    /// window's unknowns (turn and centre), in which the slots keep their covariances.
     pub(super) fn plus_anchor(&self, i: usize, mut cov: [f64; 36]) -> [f64; 36] {
         let Some(anchor) = self.n_fixed.checked_sub(1).map(|a| &self.fixed[a]) else {
             return cov;
         };
-        let j = rigid_transport(&anchor.params, &self.epochs[i].params);
+        let j = rigid_transport_turn(&anchor.params, &self.epochs[i].params);
         let carried = propagate(&j, &anchor.cov);
         for (c, a) in cov.iter_mut().zip(carried) {
             *c += a;
@@ -64,7 +68,7 @@ impl<'a> Window<'a> {
     /// (scaling the sum compounded the scale at every slide).
     pub(super) fn leaving_covariance(&self) -> Option<[f64; 36]> {
         let k = self.apriori_floor();
-        let cov = self.epoch_covariance(0)?.map(|v| v * k);
+        let cov = self.turn_covariance(0)?.map(|v| v * k);
         Some(self.plus_anchor(0, cov))
     }
 
@@ -93,8 +97,15 @@ impl<'a> Window<'a> {
         Some(standard_deviations(&self.epoch_absolute_covariance(i)?))
     }
 
-    /// 6x6 covariance (row-major) of slot `i` from the last solution (sigma0^2 scaled).
+    /// 6x6 covariance (row-major; omega, phi, kappa rad, X, Y, Z m) of slot `i` from
+    /// the last solution (sigma0^2 scaled).
     pub fn epoch_covariance(&self, i: usize) -> Option<[f64; 36]> {
+        let cov = self.turn_covariance(i)?;
+        Some(attitude::to_angles(&self.epochs[i].params, &cov))
+    }
+
+    /// [`Self::epoch_covariance`] in the window's unknowns (turn and centre).
+    pub(super) fn turn_covariance(&self, i: usize) -> Option<[f64; 36]> {
         (i < self.n_epochs && self.epochs[i].flags & EP_COV != 0).then(|| self.epochs[i].cov)
     }
 

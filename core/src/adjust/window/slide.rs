@@ -29,7 +29,7 @@ impl<'a> Window<'a> {
             Some(gone)
         } else {
             let e = &self.epochs[0];
-            let rot = Rotations::new(e.params[0], e.params[1], e.params[2]);
+            let rot = Rotations::with_turn(e.params[0], e.params[1], e.params[2]);
             let slot = FixedSlot {
                 params: e.params,
                 rot,

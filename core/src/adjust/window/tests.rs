@@ -74,7 +74,11 @@ fn assert_rhs_is_the_numerical_gradient(w: &mut Window) {
         let h = 1e-6;
         let (blk, k) = (i / 6, i % 6);
         let val = |w: &mut Window, d: f64| {
-            if blk < w.n_epochs {
+            if blk < w.n_epochs && k < 3 {
+                let mut turn = [0.0; 3];
+                turn[k] = d;
+                attitude::turn(&mut w.epochs[blk].params, turn);
+            } else if blk < w.n_epochs {
                 w.epochs[blk].params[k] += d;
             } else if Some(blk) == w.rig_block() {
                 let mut r = w.rig.to_array();
@@ -229,14 +233,14 @@ fn schur_step_zeroes_the_numerical_gradient() {
     assert!(after < 1e-3 * before, "gradient {before} -> {after}");
 }
 
-/// The GNSS residual's angle derivatives (the lever arm turning with the camera)
-/// against numerical differentiation.
+/// The GNSS residual's attitude derivatives (the lever arm turning with the camera)
+/// against numerical differentiation, near the angles' singularity too.
 #[test]
 fn gnss_lever_arm_jacobian_matches_numeric() {
     let slot = |p: [f64; 6]| {
         let mut e: EpochSlot = bytemuck::Zeroable::zeroed();
         e.params = p;
-        e.rot = Rotations::new(p[0], p[1], p[2]);
+        e.rot = Rotations::with_turn(p[0], p[1], p[2]);
         e.gnss = [1.0, 2.0, 3.0];
         e.gnss_lever = [0.3, 1.1, -0.7];
         e
@@ -251,23 +255,30 @@ fn gnss_lever_arm_jacobian_matches_numeric() {
         "{r:?}"
     );
     let p = [1.55, 0.2, -0.4, 1.0, 2.5, 2.0];
-    let (r0, j) = gnss_residual(&slot(p));
     // At zero lever the residual is the centre's offset from the fix.
     let mut plain = slot(p);
     plain.gnss_lever = [0.0; 3];
     assert_eq!(gnss_residual(&plain).0, [0.0, 0.5, -1.0]);
-    let h = 1e-7;
-    for k in 0..3 {
-        let mut q = p;
-        q[k] += h;
-        let (r1, _) = gnss_residual(&slot(q));
-        for a in 0..3 {
-            let numeric = (r1[a] - r0[a]) / h;
-            assert!(
-                (numeric - j[a][k]).abs() < 1e-6,
-                "d r{a} / d angle {k}: {numeric} against {}",
-                j[a][k]
-            );
+    let h = 1e-5;
+    let near_90 = core::f64::consts::FRAC_PI_2 - 1e-4;
+    for p in [p, [1.55, near_90, -0.4, 1.0, 2.5, 2.0]] {
+        let (_, j) = gnss_residual(&slot(p));
+        for k in 0..3 {
+            let turned = |s: f64| {
+                let (mut q, mut d) = (p, [0.0; 3]);
+                d[k] = s;
+                attitude::turn(&mut q, d);
+                gnss_residual(&slot(q)).0
+            };
+            let (r1, r0) = (turned(h), turned(-h));
+            for a in 0..3 {
+                let numeric = (r1[a] - r0[a]) / (2.0 * h);
+                assert!(
+                    (numeric - j[a][k]).abs() < 1e-6,
+                    "d r{a} / d turn {k}: {numeric} against {}",
+                    j[a][k]
+                );
+            }
         }
     }
 }
