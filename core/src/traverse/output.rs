@@ -32,7 +32,9 @@ pub mod flags {
     /// and corrected it (the rig's relative orientation and the interior orientation).
     pub const CALIBRATION_CORRECTED: u32 = 1 << 11;
     /// Informational: neither resection posed the camera; its rotation came from the
-    /// temporal matches (`traverse::turn`), its position from the prediction.
+    /// temporal matches (`traverse::turn`), its position from the prediction. Kept only
+    /// when the area matching found at least as many tie points from it as from the
+    /// prediction (`Traverse::area_prefers`).
     pub const ROTATION_FROM_MATCHES: u32 = 1 << 12;
 
     /// Flags that make an epoch count as flagged (the informational ones do not).

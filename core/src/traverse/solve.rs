@@ -35,13 +35,20 @@ impl Traverse<'_> {
                 guess = pose;
             }
         }
-        let initial = match resected {
+        let mut initial = match resected {
             Some(pose) => pose,
             None if first => self.cfg.datum,
             None => guess,
         };
         let ta = clock.now_us();
         self.track_by_area(left, right, (&initial, resected.is_some()));
+        let hypotheses = (&initial, prediction);
+        if out.flags & flags::ROTATION_FROM_MATCHES != 0
+            && self.area_prefers(left, right, hypotheses)
+        {
+            out.flags &= !flags::ROTATION_FROM_MATCHES;
+            (initial, guess) = (*prediction, *prediction);
+        }
         let area_us = elapsed(ta, clock.now_us());
         out.times.matching_us = out.times.matching_us.saturating_add(area_us);
         out.tie_points += self.n_area as u32;

@@ -294,6 +294,49 @@ fn area_matching_carries_tie_points_to_the_same_scene_point() {
     );
 }
 
+/// Without a resection, the rotation found from the matches and the motion prediction
+/// are two starting poses for the area matching: the one whose search finds more of the
+/// previous epoch's templates is kept, whichever of them is right.
+#[test]
+fn the_templates_choose_between_the_rotation_from_the_matches_and_the_prediction() {
+    let rig = rig();
+    let mut cfg = config();
+    cfg.temporal_refine = true;
+    let (mut st, _) = storage(&cfg);
+    let mut arena = Arena::new(&mut st.0);
+    let mut t = Traverse::new(cfg, &mut arena).unwrap();
+    for k in 0..4 {
+        process_view(&mut t, &rig, &truth(k), k as f64);
+    }
+    let right = truth(4);
+    // Turned by 3 deg about the vertical: 16 px in the image, beyond the search.
+    let mut wrong = right;
+    wrong.phi += 3f64.to_radians();
+    let (li, ri) = (
+        render(&rig.left, &right),
+        render(&rig.right, &rig.right_pose(&right)),
+    );
+    let lv = ImageView::new(&li, W as usize, H as usize).unwrap();
+    let rv = ImageView::new(&ri, W as usize, H as usize).unwrap();
+    let found = |t: &mut Traverse, pose: &Pose| {
+        t.track_by_area(&lv, &rv, (pose, false));
+        t.n_area
+    };
+    let (from_right, from_wrong) = (found(&mut t, &right), found(&mut t, &wrong));
+    assert!(
+        from_right > 20 && from_wrong * 4 < from_right,
+        "{from_right} vs {from_wrong}"
+    );
+    // The rotation from the matches wrong, the prediction right: the prediction wins.
+    found(&mut t, &wrong);
+    assert!(t.area_prefers(&lv, &rv, (&wrong, &right)));
+    assert_eq!(t.n_area, from_right);
+    // The rotation right, the prediction wrong: the rotation's tie points stay.
+    found(&mut t, &right);
+    assert!(!t.area_prefers(&lv, &rv, (&right, &wrong)));
+    assert_eq!(t.n_area, from_right);
+}
+
 #[test]
 fn a_frame_from_another_place_is_lost_and_the_traverse_recovers() {
     let cfg = config();
