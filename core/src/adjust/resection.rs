@@ -426,9 +426,8 @@ pub fn refine(
     for _ in 0..cfg.max_iterations {
         normal = Matrix6::zeros();
         let mut g = Vector6::zeros();
+        let rotation = attitude::with_turn_derivatives(pose.omega, pose.phi, pose.kappa);
         for c in corr.iter().filter(|c| member(c)) {
-            let (w, p, k) = (pose.omega, pose.phi, pose.kappa);
-            let rotation = attitude::with_turn_derivatives(w, p, k);
             let Ok(pr) = project_with_rotation(&pose, rotation, focal_mm, &c.point) else {
                 continue;
             };
@@ -472,12 +471,7 @@ pub fn refine(
     let dof = (2 * mask_count).saturating_sub(6).max(1);
     let s02 = cost / dof as f64;
     let cov = normal.cholesky().ok_or(ResectionError::Singular)?.inverse() * s02;
-    let mut turn_cov = [0.0; 36];
-    for r in 0..6 {
-        for c in 0..6 {
-            turn_cov[r * 6 + c] = cov[(r, c)];
-        }
-    }
+    let turn_cov = core::array::from_fn(|i| cov[(i / 6, i % 6)]);
     let std = standard_deviations(&attitude::to_angles(&pose.to_params(), &turn_cov));
     Ok(ResectionResult {
         pose,
