@@ -6,8 +6,8 @@
 //! turn about one axis. With the datum's omega of 90 deg (the camera level, looking
 //! along Y), phi is the heading: a vehicle that turns a quarter from its start drives
 //! along that line. On the rendered 1.2 km drive a quarter of the epochs lie within
-//! 8 deg of it; there the window needed a third more iterations and once did not
-//! converge (an epoch off by 1.2 m and 3 deg at the onset of a turn).
+//! 8 deg of it; there the window needed a third more iterations and once stopped at
+//! its limit (a step 1.16 m and 2.6 deg off, at the onset of a turn).
 //!
 //! So the unknowns are `d`, a rotation vector in the object frame (`d = E da`, the
 //! [`angle_rates`] of the angles): `M(d) = M exp(-[d]x)`, whose Jacobian

@@ -652,8 +652,8 @@ fn slide_through(s: &Scene, quarter: &Matrix3<f64>) -> (usize, [f64; 2]) {
         w.add_epoch(&start, 0.2 * k as f64).unwrap();
         for o in s.observations.iter().filter(|o| o.epoch == k) {
             if ids[o.point] == u32::MAX || w.point_tag(ids[o.point]).is_none() {
-                let p = s.points[o.point];
-                ids[o.point] = w.add_point([p[0] + 0.1, p[1] - 0.1, p[2] + 0.05]).unwrap();
+                let p = Vector3::from(s.points[o.point]) + quarter * Vector3::new(0.1, -0.1, 0.05);
+                ids[o.point] = w.add_point([p[0], p[1], p[2]]).unwrap();
             }
             w.add_observation(Observation::new(
                 k as u32,
