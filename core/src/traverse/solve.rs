@@ -26,7 +26,8 @@ impl Traverse<'_> {
             }
         }
         // Without a resection the prediction stands, its rotation corrected from the
-        // temporal matches when they tell it; an epoch flagged below is tied to it.
+        // temporal matches when they tell it and the templates agree (`area_prefers`,
+        // below); an epoch flagged below is tied to it.
         let mut guess = *prediction;
         if !first && resected.is_none() {
             out.flags |= flags::NO_RESECTION;
