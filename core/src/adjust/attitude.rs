@@ -15,7 +15,7 @@
 //! stored angles ([`turn`]); a prior's residual is the turn between the prior and the
 //! pose ([`residual`]); covariances in these coordinates become covariances of the
 //! angles only where they are reported ([`to_angles`]).
-use super::propagation::{angle_rates, propagate};
+use super::propagation::{angle_rates, propagate, transport};
 use crate::camera::{angles_from_rotation, rotation};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
@@ -57,14 +57,7 @@ pub fn to_angles(params: &[f64; 6], cov: &[f64; 36]) -> [f64; 36] {
     let e_inv = angle_rates(params)
         .try_inverse()
         .unwrap_or_else(Matrix3::identity);
-    let mut j = [0.0; 36];
-    for r in 0..3 {
-        for c in 0..3 {
-            j[r * 6 + c] = e_inv[(r, c)];
-        }
-        j[(r + 3) * 6 + r + 3] = 1.0;
-    }
-    propagate(&j, cov)
+    propagate(&transport(e_inv, Matrix3::zeros()), cov)
 }
 
 #[cfg(test)]
@@ -119,26 +112,49 @@ mod tests {
 
     #[test]
     fn a_turn_covariance_becomes_that_of_the_angles() {
-        // Away from the singularity, a small turn of known spread moves the angles by
-        // E^-1 d: compare with the angles' differences of turned poses.
+        // Away from the singularity: the angles' Jacobian by the turn, from the stored
+        // angles of turned poses, carries a correlated turn covariance as `to_angles`
+        // does; the centre's block passes as it is.
         let p = POSES[1];
-        let sd = [1e-3, 2e-3, 3e-3];
+        let h = 1e-6;
+        let jac: [[f64; 3]; 3] = core::array::from_fn(|r| {
+            core::array::from_fn(|k| {
+                let (mut plus, mut minus, mut d) = (p, p, [0.0; 3]);
+                d[k] = h;
+                turn(&mut plus, d);
+                d[k] = -h;
+                turn(&mut minus, d);
+                (plus[r] - minus[r]) / (2.0 * h)
+            })
+        });
         let mut cov = [0.0; 36];
-        for a in 0..3 {
-            cov[a * 6 + a] = sd[a] * sd[a];
-            cov[(a + 3) * 6 + a + 3] = 0.01;
+        let turn_cov = [
+            [4e-6, 1e-6, -2e-6],
+            [1e-6, 9e-6, 3e-6],
+            [-2e-6, 3e-6, 1.6e-5],
+        ];
+        for r in 0..3 {
+            for c in 0..3 {
+                cov[r * 6 + c] = turn_cov[r][c];
+            }
+            cov[(r + 3) * 6 + r + 3] = 0.01;
+            cov[(r + 3) * 6 + r] = 1e-5;
+            cov[r * 6 + r + 3] = 1e-5;
         }
         let angles = to_angles(&p, &cov);
-        let e_inv = angle_rates(&p).try_inverse().unwrap();
         for r in 0..3 {
-            let expected: f64 = (0..3).map(|k| e_inv[(r, k)].powi(2) * sd[k] * sd[k]).sum();
-            assert!((angles[r * 6 + r] - expected).abs() < 1e-12 * expected.max(1e-12));
-            let mut turned = p;
-            let mut d = [0.0; 3];
-            d[0] = 1e-6;
-            turn(&mut turned, d);
-            assert!(((turned[r] - p[r]) / 1e-6 - e_inv[(r, 0)]).abs() < 1e-4);
+            for c in 0..3 {
+                let numeric: f64 = (0..3)
+                    .flat_map(|a| (0..3).map(move |b| (a, b)))
+                    .map(|(a, b)| jac[r][a] * turn_cov[a][b] * jac[c][b])
+                    .sum();
+                let got = angles[r * 6 + c];
+                assert!(
+                    (got - numeric).abs() < 1e-6 * numeric.abs().max(1e-6),
+                    "{r} {c}: {got} against {numeric}"
+                );
+            }
+            assert_eq!(angles[(r + 3) * 6 + r + 3], 0.01);
         }
-        assert_eq!(angles[3 * 6 + 3], 0.01);
     }
 }

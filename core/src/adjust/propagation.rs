@@ -32,8 +32,9 @@ fn lever(from: &[f64; 6], to: &[f64; 6]) -> Matrix3<f64> {
 }
 
 /// The 6x6 (row-major) with the attitude block `a`, the centre's block `c` under the
-/// attitude and the identity for the centre.
-fn transport(a: Matrix3<f64>, c: Matrix3<f64>) -> [f64; 36] {
+/// attitude and the identity for the centre: a pose Jacobian whose centre moves with
+/// itself alone and with the attitude as `c` says.
+pub(crate) fn transport(a: Matrix3<f64>, c: Matrix3<f64>) -> [f64; 36] {
     let mut j = [0.0; 36];
     for r in 0..3 {
         for k in 0..3 {

@@ -17,7 +17,7 @@ use super::search::{match_pass, Best, Features, PairStats, PassParams};
 use super::spread::spread;
 use super::stereo::{RectifiedBand, RigBand};
 use super::temporal::GuidedWindow;
-use super::tracks::{Observation, TrackStats, Tracks};
+use super::tracks::{Observation, StereoPx, TrackStats, Tracks};
 use crate::budget::Arena;
 use crate::camera::{Pose, Rig};
 use crate::image::ImageView;
@@ -774,18 +774,12 @@ impl<'a> Matcher<'a> {
     /// Replaces the current-epoch positions of the tie point in track `slot` (after a
     /// refinement the matcher cannot do, e.g. against the previous epoch's image), with
     /// the right position's precision.
-    pub fn refine_tie_point(
-        &mut self,
-        slot: u32,
-        (left, right): ([f32; 2], [f32; 2]),
-        right_sigma: [f32; 2],
-    ) -> bool {
-        let epoch = self.epoch;
+    pub fn refine_tie_point(&mut self, slot: u32, px: StereoPx) -> bool {
         let o = Observation {
-            epoch,
-            left,
-            right,
-            right_sigma,
+            epoch: self.epoch,
+            left: px.left,
+            right: px.right,
+            right_sigma: px.right_sigma,
         };
         self.tracks.set_observation(slot, o)
     }

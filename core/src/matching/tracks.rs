@@ -49,6 +49,27 @@ pub struct Observation {
     pub right_sigma: [f32; 2],
 }
 
+/// One epoch's stereo positions of a point: left and right pixels, and the right
+/// one's precision from its stereo correlation (pixels; x, y; zero: not measured).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct StereoPx {
+    pub left: [f32; 2],
+    pub right: [f32; 2],
+    pub right_sigma: [f32; 2],
+}
+
+impl Observation {
+    /// The observation's positions.
+    pub fn px(&self) -> StereoPx {
+        StereoPx {
+            left: self.left,
+            right: self.right,
+            right_sigma: self.right_sigma,
+        }
+    }
+}
+
 /// What one update did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct TrackStats {

@@ -14,11 +14,11 @@
 //! descriptors win every conflict, so an image point is observed once.
 
 use super::patches::{PatchInfo, NO_ID};
-use super::solve::StereoPx;
 use super::Traverse;
 use crate::camera::{project_to_pixel, Pose};
 use crate::image::ImageView;
 use crate::matching::refine::{correlate, recentre, refine_checked, TEMPLATE_LEN};
+use crate::matching::StereoPx;
 use bytemuck::{Pod, Zeroable};
 
 /// A tie point found by area matching.
@@ -31,9 +31,7 @@ pub struct AreaTie {
     pub tag: u32,
     pub point: u32,
     /// Current left and right positions, pixels, and the right one's precision.
-    pub left: [f32; 2],
-    pub right: [f32; 2],
-    pub right_sigma: [f32; 2],
+    pub px: StereoPx,
 }
 
 /// Predicted left and right pixels of a template's point, and its depths (metres) at
@@ -153,7 +151,7 @@ impl Traverse<'_> {
                 continue;
             };
             let duplicate = self.matcher.tie_points().any(|t| near(t.cur.left, l))
-                || self.area[..self.n_area].iter().any(|a| near(a.left, l));
+                || self.area[..self.n_area].iter().any(|a| near(a.px.left, l));
             if duplicate {
                 continue;
             }
@@ -161,9 +159,11 @@ impl Traverse<'_> {
                 entry: i as u32,
                 tag: info.tag,
                 point: info.point,
-                left: l,
-                right: right_peak.at,
-                right_sigma: right_peak.sigma,
+                px: StereoPx {
+                    left: l,
+                    right: right_peak.at,
+                    right_sigma: right_peak.sigma,
+                },
             };
             self.n_area += 1;
         }
@@ -222,12 +222,7 @@ impl Traverse<'_> {
                 new_points += 1;
                 (tag, point)
             };
-            let obs = StereoPx {
-                left: t.left,
-                right: t.right,
-                right_sigma: t.right_sigma,
-            };
-            super::add_stereo_observations(&self.cfg, &mut self.window, id, point, obs, tag);
+            super::add_stereo_observations(&self.cfg, &mut self.window, id, point, t.px, tag);
             self.area[a].tag = tag;
             self.area[a].point = point;
         }
@@ -239,8 +234,8 @@ impl Traverse<'_> {
 impl From<&AreaTie> for PatchInfo {
     fn from(a: &AreaTie) -> Self {
         PatchInfo {
-            right: a.right,
-            right_sigma: a.right_sigma,
+            right: a.px.right,
+            right_sigma: a.px.right_sigma,
             tag: a.tag,
             point: a.point,
         }

@@ -39,10 +39,10 @@ pub const TURN_SAMPLES: u32 = 64;
 /// Tie points per epoch at most (the spreading keeps the best spread ones).
 pub const MAX_TIE_POINTS: usize = 400;
 /// SIFT pending candidates per image column, over [`PENDING_SCALE`]: 1152 at 640 px,
-/// 576 at 320 px (`docs/configuration.md`, "Capacities"). The rendered streets' poses came out the same to the byte as with
-/// 2048 and 1024 (`bench/traverse/README.md`, "Observation weights from the
-/// correlation peak"): no candidate waits beyond these there. The bytes saved pay for
-/// the right positions' precision at 320x240.
+/// 576 at 320 px (`docs/configuration.md`, "Capacities"). The rendered streets' poses
+/// came out the same to the byte as with 2048 and 1024 (`bench/traverse/README.md`,
+/// "Observation weights from the correlation peak"): no candidate waits beyond these
+/// there. The bytes saved pay for the right positions' precision at 320x240.
 pub const PENDING_PER_COLUMN: usize = 9;
 pub const PENDING_SCALE: usize = 5;
 /// Fewest SIFT pending candidates, whatever the width.

@@ -49,7 +49,7 @@ use crate::matching::refine::{
 };
 use crate::matching::{
     relative_motion, Features, MatchError, MatchOutcome as MatchStatus, Matcher, StereoFeatures,
-    StereoGeometry, TiePoint,
+    StereoGeometry, StereoPx, TiePoint,
 };
 use crate::sift::{Sift, SiftError};
 use area::AreaTie;
@@ -91,9 +91,7 @@ pub struct Refined {
     pub slot: u32,
     /// The template (patch store index) the position was found with.
     pub entry: u32,
-    pub left: [f32; 2],
-    pub right: [f32; 2],
-    pub right_sigma: [f32; 2],
+    pub px: StereoPx,
 }
 
 const NO_POINT: TrackPoint = TrackPoint {

@@ -38,16 +38,17 @@ impl Traverse<'_> {
             self.refined[n] = Refined {
                 slot: tie.slot,
                 entry: entry as u32,
-                left: l.at,
-                right: r.at,
-                right_sigma: r.sigma,
+                px: StereoPx {
+                    left: l.at,
+                    right: r.at,
+                    right_sigma: r.sigma,
+                },
             };
             n += 1;
         }
         self.n_refined = n;
         for r in self.refined[..n].iter() {
-            self.matcher
-                .refine_tie_point(r.slot, (r.left, r.right), r.right_sigma);
+            self.matcher.refine_tie_point(r.slot, r.px);
         }
     }
 
@@ -84,7 +85,7 @@ impl Traverse<'_> {
             let Some(tie) = self.matcher.tie_points().find(|t| t.slot == r.slot) else {
                 continue;
             };
-            if tie.cur.left != r.left || !carry(patches, entry, (r.left, r.right)) {
+            if tie.cur.left != r.px.left || !carry(patches, entry, (r.px.left, r.px.right)) {
                 continue;
             }
             let info = tie_info(self.track_points, window, &tie);
@@ -94,8 +95,8 @@ impl Traverse<'_> {
             .iter()
             .filter(|a| a.point != patches::NO_ID)
         {
-            if carry(patches, a.entry as usize, (a.left, a.right)) {
-                patches.keep(a.entry as usize, a.left, a.into());
+            if carry(patches, a.entry as usize, (a.px.left, a.px.right)) {
+                patches.keep(a.entry as usize, a.px.left, a.into());
             }
         }
         for tie in self.matcher.tie_points() {
@@ -110,9 +111,9 @@ impl Traverse<'_> {
             .iter()
             .filter(|a| a.point != patches::NO_ID)
         {
-            if patches.index_of(a.left).is_none() {
-                let depth = stereo_depth(cfg, window, a.left, a.right);
-                patches.push(left, a.left, a.into(), depth);
+            if patches.index_of(a.px.left).is_none() {
+                let depth = stereo_depth(cfg, window, a.px.left, a.px.right);
+                patches.push(left, a.px.left, a.into(), depth);
             }
         }
         let quads = self.matcher.quads();

@@ -159,7 +159,7 @@ impl Traverse<'_> {
                 Some(p) => p,
                 None => {
                     let at = (prev_id, &prev);
-                    let obs = StereoPx::from(&tie.prev);
+                    let obs = tie.prev.px();
                     let Some(p) = new_point(&self.cfg, &mut self.window, at, obs, tie.track_id)
                     else {
                         continue;
@@ -174,7 +174,7 @@ impl Traverse<'_> {
                     p
                 }
             };
-            let obs = StereoPx::from(&tie.cur);
+            let obs = tie.cur.px();
             add_stereo_observations(&self.cfg, &mut self.window, id, point, obs, tie.track_id);
         }
         new_points + self.add_area_ties(id, (prev_id, &prev))
@@ -305,25 +305,6 @@ pub(super) fn known_point(map: &[TrackPoint], window: &Window, tie: &TiePoint) -
     (e.track_id == tie.track_id && e.point != u32::MAX)
         .then_some(e.point)
         .filter(|&p| window.point_tag(p) == Some(tie.track_id))
-}
-
-/// A stereo observation of one epoch: left and right pixels, and the right one's
-/// precision from its stereo correlation (pixels; x, y; zero: not measured).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(super) struct StereoPx {
-    pub left: [f32; 2],
-    pub right: [f32; 2],
-    pub right_sigma: [f32; 2],
-}
-
-impl From<&crate::matching::Observation> for StereoPx {
-    fn from(o: &crate::matching::Observation) -> Self {
-        StereoPx {
-            left: o.left,
-            right: o.right,
-            right_sigma: o.right_sigma,
-        }
-    }
 }
 
 /// An image observation of `point` at pixel `px` whose correlation gave it the

@@ -249,8 +249,9 @@ fn area_matching_carries_tie_points_to_the_same_scene_point() {
                 .iter()
                 .filter(|a| a.point != patches::NO_ID)
             {
-                let (xyz, _) = cast(&rig.left, &left, a.left[0] as f64, a.left[1] as f64).unwrap();
-                let er = reprojection_px(&rig.right, &right, &xyz, a.right);
+                let [c, r] = a.px.left.map(f64::from);
+                let (xyz, _) = cast(&rig.left, &left, c, r).unwrap();
+                let er = reprojection_px(&rig.right, &right, &xyz, a.px.right);
                 // The ground a few metres ahead shears the stereo template (its
                 // disparity changes by a third of a pixel per row): up to a pixel there.
                 assert!(er < 1.0, "epoch {k}: {a:?}, right {er} px");
