@@ -38,6 +38,26 @@ struct Slot {
     lost: bool,
 }
 
+/// Held packets never sent, held by the receiver (selectively acknowledged), and
+/// declared lost: disjoint sets (a packet is sacked or lost only once sent, and a
+/// sacked one is not lost). The never-sent ones are the newest: packets are pushed
+/// at the end and the first of them goes first.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Tally {
+    unsent: usize,
+    sacked: usize,
+    lost: usize,
+}
+
+impl Tally {
+    /// The held packet `s` leaves the window.
+    fn release(&mut self, s: &Slot) {
+        self.unsent -= usize::from(s.sent_at.is_none());
+        self.sacked -= usize::from(s.sacked);
+        self.lost -= usize::from(s.lost);
+    }
+}
+
 /// What an acknowledgement did to the window.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct AckOutcome {
@@ -82,6 +102,9 @@ pub struct TxWindow<B> {
     head: usize,
     /// Packets held (unacknowledged).
     count: usize,
+    /// How many of the held packets are in each state: the sender asks what is due
+    /// each time it polls, and counting saves a pass over the window per poll.
+    tally: Tally,
     /// Transmissions so far (the order of the next one).
     transmissions: u32,
     /// Start of the retransmission timer: the last progress (an acknowledgement
@@ -102,6 +125,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
             base: 0,
             head: 0,
             count: 0,
+            tally: Tally::default(),
             transmissions: 0,
             timer: None,
         }
@@ -140,6 +164,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
         self.base = next_seq;
         self.head = 0;
         self.count = 0;
+        self.tally = Tally::default();
         self.timer = None;
     }
 
@@ -173,6 +198,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
             ..Slot::default()
         };
         self.count += 1;
+        self.tally.unsent += 1;
         Ok(Ok(seq))
     }
 
@@ -195,10 +221,14 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
     pub fn ack(&mut self, now: u64, next_expected: u16, sack: u64) -> AckOutcome {
         let mut out = AckOutcome::default();
         let mut latest = None::<u32>;
+        // Karn's rule for the order as for the round trip: of a packet sent more than once
+        // it is not known which copy arrived. Counting its last transmission as delivered
+        // declared lost everything sent before a time-out's probe that a busy receiver had
+        // simply not reached yet, and the whole window went again.
         let mut note = |s: &Slot, out: &mut AckOutcome| {
-            if let Some(t) = s.sent_at {
+            if let (Some(t), false) = (s.sent_at, s.retransmitted) {
                 latest = Some(latest.map_or(s.order, |l: u32| l.max(s.order)));
-                if !s.retransmitted && out.rtt_us.is_none() {
+                if out.rtt_us.is_none() {
                     out.rtt_us = Some(now.saturating_sub(t));
                 }
             }
@@ -210,6 +240,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
                 if !s.sacked {
                     note(&s, &mut out);
                 }
+                self.tally.release(&s);
             }
             self.base = next_expected;
             self.head = self.slot_at(d as usize);
@@ -230,6 +261,8 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
                     note(&s, &mut out);
                     self.state[i].sacked = true;
                     self.state[i].lost = false;
+                    self.tally.sacked += 1;
+                    self.tally.lost -= usize::from(s.lost);
                     out.sacked += 1;
                 }
             }
@@ -245,9 +278,8 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
 
     /// Whether a packet was sent and neither acknowledged nor declared lost.
     fn in_flight(&self) -> bool {
-        (0..self.count)
-            .map(|k| self.state[self.slot_at(k)])
-            .any(|s| s.sent_at.is_some() && !s.sacked && !s.lost)
+        let t = self.tally;
+        self.count > t.unsent + t.sacked + t.lost
     }
 
     /// The order the next transmission gets: a probe sent now stands after
@@ -277,6 +309,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
                 lost += 1;
             }
         }
+        self.tally.lost += lost;
         lost
     }
 
@@ -297,6 +330,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
                 lost += 1;
             }
         }
+        self.tally.lost += lost;
         lost
     }
 
@@ -306,22 +340,14 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
     /// what else is lost, so a receiver that was only busy costs one packet.
     /// Returns why it goes and its sequence number ([`TxWindow::packet`] gives its bytes).
     pub fn next_transmission(&mut self, now: u64) -> Option<(Transmission, u16)> {
-        let mut pick = None;
-        for k in 0..self.count {
-            let s = &self.state[self.slot_at(k)];
-            if s.sacked {
-                continue;
-            }
-            match s.sent_at {
-                Some(_) if s.lost => {
-                    pick = Some((k, Transmission::Lost));
-                    break;
-                }
-                None if pick.is_none() => pick = Some((k, Transmission::New)),
-                _ => {}
-            }
-        }
-        let (k, why) = pick?;
+        let (k, why) = if self.tally.lost > 0 {
+            let k = (0..self.count).find(|&k| self.state[self.slot_at(k)].lost)?;
+            (k, Transmission::Lost)
+        } else if self.tally.unsent > 0 {
+            (self.count - self.tally.unsent, Transmission::New)
+        } else {
+            return None;
+        };
         Some((why, self.record(k, now, why != Transmission::New)))
     }
 
@@ -332,6 +358,8 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
             self.timer = Some(now);
         }
         let s = &mut self.state[self.slot_at(k)];
+        self.tally.unsent -= usize::from(s.sent_at.is_none());
+        self.tally.lost -= usize::from(s.lost);
         s.retransmitted |= again;
         s.sent_at = Some(now);
         s.lost = false;
@@ -383,9 +411,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
 
     /// Whether a packet waits to be sent or resent without a timer.
     pub fn has_due(&self) -> bool {
-        (0..self.count)
-            .map(|k| self.state[self.slot_at(k)])
-            .any(|s| !s.sacked && (s.sent_at.is_none() || s.lost))
+        self.tally.unsent + self.tally.lost > 0
     }
 
     /// Marks every packet in flight from `from` on as lost (the receiver asked
@@ -395,8 +421,9 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
         for k in skip..self.count {
             let i = self.slot_at(k);
             let s = &mut self.state[i];
-            if !s.sacked && s.sent_at.is_some() {
+            if !s.sacked && s.sent_at.is_some() && !s.lost {
                 s.lost = true;
+                self.tally.lost += 1;
             }
         }
     }

@@ -155,3 +155,107 @@ fn the_reorder_ring_holds_after_a_gap_and_delivers_in_order() {
     assert_eq!(r.accept(0, &[2]), Accept::Duplicate);
     assert_eq!(r.accept(1, &[3]), Accept::Deliver);
 }
+
+#[test]
+fn the_acknowledgement_of_a_resent_packet_declares_nothing_lost() {
+    // A receiver too busy to answer: the time-out resends the oldest packet with the
+    // probe. Then it catches up and acknowledges the first two, the original of the
+    // resent one among them: which copy arrived is not known, and the packets sent
+    // before the probe are not lost, only not reached yet.
+    let mut storage = [0u8; 16 * 4];
+    let mut w = sent(&mut storage, 8);
+    assert!(w.timer_expired(100, 100));
+    assert_eq!(w.resend_oldest(100), Some(0));
+    let out = w.ack(150, 2, 0);
+    assert_eq!(out.released, 2);
+    assert_eq!(
+        out.lost, 0,
+        "nothing declared lost from the resent packet's order"
+    );
+    assert_eq!(
+        out.rtt_us,
+        Some(150),
+        "packet 1, sent once, times the round trip"
+    );
+    assert!(send_all(&mut w, 151).is_empty(), "nothing resent");
+    // A later delivery of packets sent once still tells a loss.
+    let out = w.ack(160, 2, 0b11111);
+    assert_eq!(out.lost, 1, "packet 2 is missing while 3 to 7 arrived");
+    assert_eq!(&send_all(&mut w, 161)[..], &[2]);
+}
+
+/// The tally recounted from the slots, as the scans over the window gave it.
+fn recount(w: &TxWindow<&mut [u8]>) -> Tally {
+    let mut t = Tally::default();
+    for k in 0..w.count {
+        let s = w.state[w.slot_at(k)];
+        t.unsent += usize::from(s.sent_at.is_none());
+        t.sacked += usize::from(s.sacked);
+        t.lost += usize::from(s.lost);
+    }
+    t
+}
+
+/// The next transmission as the full scan picked it: the first lost packet, else
+/// the first never sent.
+fn scanned_pick(w: &TxWindow<&mut [u8]>) -> Option<(Transmission, u16)> {
+    let slots = (0..w.count).map(|k| (k, w.state[w.slot_at(k)]));
+    let lost = slots
+        .clone()
+        .find(|(_, s)| !s.sacked && s.sent_at.is_some() && s.lost);
+    let new = slots
+        .clone()
+        .find(|(_, s)| !s.sacked && s.sent_at.is_none());
+    match (lost, new) {
+        (Some((k, _)), _) => Some((Transmission::Lost, w.base.wrapping_add(k as u16))),
+        (None, Some((k, _))) => Some((Transmission::New, w.base.wrapping_add(k as u16))),
+        _ => None,
+    }
+}
+
+proptest::proptest! {
+    /// Whatever acknowledgements, probes and time-outs arrive, bogus ones included,
+    /// the counted states are the slots' and the next transmission is the scan's.
+    #[test]
+    fn the_tally_follows_the_slots_under_any_sequence_of_events(
+        slots in 1usize..=16,
+        start in proptest::prelude::any::<u16>(),
+        events in proptest::collection::vec(
+            (0u8..7, proptest::prelude::any::<u16>(), proptest::prelude::any::<u64>()),
+            0..200,
+        ),
+    ) {
+        let mut storage = [0u8; 16 * 4];
+        let mut w = TxWindow::new(&mut storage[..slots * 4], 4);
+        w.reset(start);
+        for (i, (op, a, b)) in events.into_iter().enumerate() {
+            let now = i as u64 * 10;
+            match op {
+                0 => {
+                    let _ = w.push(&[a as u8]);
+                }
+                1 => {
+                    let expected = scanned_pick(&w);
+                    proptest::prop_assert_eq!(w.next_transmission(now), expected);
+                }
+                // An acknowledgement near the window, or anywhere.
+                2 => {
+                    w.ack(now, w.base.wrapping_add(a % 20), b);
+                }
+                3 => {
+                    w.ack(now, a, b);
+                }
+                4 => {
+                    w.lost_before(a as u32);
+                }
+                5 => w.resend_from(w.base.wrapping_add(a % 20)),
+                _ => {
+                    w.resend_oldest(now);
+                }
+            }
+            let t = recount(&w);
+            proptest::prop_assert_eq!(w.tally, t);
+            proptest::prop_assert_eq!(w.has_due(), t.unsent + t.lost > 0);
+        }
+    }
+}
