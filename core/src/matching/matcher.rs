@@ -12,7 +12,7 @@ use super::grid::Grid;
 use super::motion::{check_motion, QuadObs};
 use super::predict::predict_positions;
 use super::quad::{close_loops, LoopDistances, Quad, QuadStats};
-use super::refine::{refine_checked, RefineError};
+use super::refine::{refine_checked, Correlator, RefineError};
 use super::search::{match_pass, Best, Features, PairStats, PassParams};
 use super::spread::spread;
 use super::stereo::{RectifiedBand, RigBand};
@@ -318,6 +318,7 @@ impl<'a> Matcher<'a> {
             }
         };
         cur.right_of[nl..].fill(NONE);
+        let mut buf = Correlator::new();
         for i in 0..nl {
             cur.dist[i] = self.qbest[i].d1;
             let j = cur.right_of[i];
@@ -330,7 +331,7 @@ impl<'a> Matcher<'a> {
             let (Some(rc), Some((li, ri))) = (self.cfg.refine, images) else {
                 continue;
             };
-            match refine_checked(&li, &ri, [kl.x, kl.y], [kr.x, kr.y], &rc) {
+            match refine_checked(&mut buf, &li, &ri, [kl.x, kl.y], [kr.x, kr.y], &rc) {
                 Ok(p) => {
                     cur.right_px[i] = p.at;
                     cur.right_sigma[i] = p.sigma;

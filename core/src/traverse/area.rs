@@ -17,7 +17,7 @@ use super::patches::{PatchInfo, NO_ID};
 use super::Traverse;
 use crate::camera::{project_to_pixel, Pose};
 use crate::image::ImageView;
-use crate::matching::refine::{correlate, recentre, refine_checked, TEMPLATE_LEN};
+use crate::matching::refine::{refine_checked, Correlator, TEMPLATE_LEN};
 use crate::matching::StereoPx;
 use bytemuck::{Pod, Zeroable};
 
@@ -115,6 +115,7 @@ impl Traverse<'_> {
             SEARCH_PREDICTED_PX
         };
         let mut tpl = [0f32; TEMPLATE_LEN];
+        let mut buf = Correlator::new();
         for i in 0..patches.len() {
             if self.n_area >= room {
                 break;
@@ -143,11 +144,13 @@ impl Traverse<'_> {
                 continue;
             }
             let half = patches.half();
-            let Ok(found) = correlate(&tpl, half, left, pl, (r, r), rcfg.min_ncc) else {
+            let Ok(found) = buf.correlate(&tpl, half, left, pl, (r, r), rcfg.min_ncc) else {
                 continue;
             };
-            let l = recentre(&tpl, half, left, found, (1, 1), rcfg.min_ncc).at;
-            let Ok(right_peak) = refine_checked(left, right, l, pr, &rcfg) else {
+            let l = buf
+                .recentre(&tpl, half, left, found, (1, 1), rcfg.min_ncc)
+                .at;
+            let Ok(right_peak) = refine_checked(&mut buf, left, right, l, pr, &rcfg) else {
                 continue;
             };
             let duplicate = self.matcher.tie_points().any(|t| near(t.cur.left, l))

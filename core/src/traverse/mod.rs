@@ -44,8 +44,8 @@ use crate::camera::{angles_from_rotation, Camera, Pose};
 use crate::features::FeatureSet;
 use crate::image::ImageView;
 use crate::matching::refine::{
-    correlate, magnify_template, recentre, refine_checked, sample_template, search_line,
-    LineSegment, TEMPLATE_LEN,
+    magnify_template, refine_checked, sample_template, search_line, Correlator, LineSegment,
+    TEMPLATE_LEN,
 };
 use crate::matching::{
     relative_motion, Features, MatchError, MatchOutcome as MatchStatus, Matcher, StereoFeatures,

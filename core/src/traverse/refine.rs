@@ -15,6 +15,7 @@ impl Traverse<'_> {
         let h = rcfg.half_window as usize;
         let rad = rcfg.search_radius as usize;
         let mut tpl = [0f32; TEMPLATE_LEN];
+        let mut buf = Correlator::new();
         let mut n = 0;
         for tie in self.matcher.tie_points() {
             if n >= self.refined.len() {
@@ -28,11 +29,12 @@ impl Traverse<'_> {
             if !template_at_scale(patches, entry, scale, &mut tpl) {
                 continue;
             }
-            let Ok(found) = correlate(&tpl, h, left, tie.cur.left, (rad, rad), rcfg.min_ncc) else {
+            let Ok(found) = buf.correlate(&tpl, h, left, tie.cur.left, (rad, rad), rcfg.min_ncc)
+            else {
                 continue;
             };
-            let l = recentre(&tpl, h, left, found, (1, 1), rcfg.min_ncc);
-            let Ok(r) = refine_checked(left, right, l.at, tie.cur.right, &rcfg) else {
+            let l = buf.recentre(&tpl, h, left, found, (1, 1), rcfg.min_ncc);
+            let Ok(r) = refine_checked(&mut buf, left, right, l.at, tie.cur.right, &rcfg) else {
                 continue;
             };
             self.refined[n] = Refined {
@@ -147,6 +149,7 @@ impl Traverse<'_> {
         let (cfg, window) = (&self.cfg, &self.window);
         let kps = self.features[fill][0].keypoints();
         let mut tpl = [0f32; TEMPLATE_LEN];
+        let mut buf = Correlator::new();
         let mut live = patches.live();
         for (i, k) in kps.iter().enumerate().take(cfg.matching.max_keypoints) {
             if live >= LINE_SEARCH_UNTIL || !patches.has_room() {
@@ -162,7 +165,7 @@ impl Traverse<'_> {
             let Ok(guess) = search_line(&tpl, h, right, line, accept) else {
                 continue;
             };
-            let Ok(r) = refine_checked(left, right, at, guess, &rcfg) else {
+            let Ok(r) = refine_checked(&mut buf, left, right, at, guess, &rcfg) else {
                 continue;
             };
             let depth = stereo_depth(cfg, window, at, r.at);

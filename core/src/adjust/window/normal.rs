@@ -249,7 +249,8 @@ impl<'a> Window<'a> {
                             continue;
                         }
                         sc.g[i] += wi * r[c];
-                        for j in 0..6 {
+                        // The lower triangle: all the reduced system is read for.
+                        for j in 0..=i {
                             sc.u[i * 6 + j] += wi * jc[c][j];
                         }
                         // Cross blocks with the later blocks: epoch x rig, epoch x
@@ -351,10 +352,11 @@ impl<'a> Window<'a> {
                     interior_block.filter(|_| a != self.interior_scratch()),
                 ];
                 let sa = &self.scratch[a];
-                // U, gradient, and the cross blocks with the rig and the interior.
+                // U (its lower triangle), gradient, and the cross blocks with the rig
+                // and the interior.
                 for i in 0..6 {
                     self.rhs[6 * ba + i] += sa.g[i];
-                    for j in 0..6 {
+                    for j in 0..=i {
                         self.reduced[(6 * ba + i) * nc + 6 * ba + j] += sa.u[i * 6 + j];
                     }
                 }
@@ -384,7 +386,8 @@ impl<'a> Window<'a> {
                     let wb = nalgebra::Matrix6x3::from_row_slice(&self.scratch[bidx].w);
                     let m = wav * wb.transpose();
                     for i in 0..6 {
-                        for j in 0..6 {
+                        let last = if bb == ba { i } else { 5 };
+                        for j in 0..=last {
                             self.reduced[(6 * ba + i) * nc + 6 * bb + j] -= m[(i, j)];
                         }
                     }

@@ -116,7 +116,9 @@ fn ncc_refinement_recovers_subpixel_disparity() {
 #[test]
 fn row_search_finds_the_disparity_and_refuses_a_repeated_texture() {
     use refine::TEMPLATE_LEN;
-    use refine::{refine_checked, sample_template, search_line, LineSegment, RefineError};
+    use refine::{
+        refine_checked, sample_template, search_line, Correlator, LineSegment, RefineError,
+    };
     let row = |x: f32, range| LineSegment::row([x, 30.0], range);
     let (w, h) = (240, 60);
     let left = texture(w, h, 0.0);
@@ -146,7 +148,9 @@ fn row_search_finds_the_disparity_and_refuses_a_repeated_texture() {
         assert!((guess[0] - (x - 23.6)).abs() <= 0.5, "{guess:?} at {x}");
         assert_eq!(guess[1], 30.0);
         // The refinement's own error on this texture reaches 0.1 px at x = 60.
-        let p = refine_checked(&li, &ri, [x, 30.0], guess, &cfg).unwrap().at;
+        let p = refine_checked(&mut Correlator::new(), &li, &ri, [x, 30.0], guess, &cfg)
+            .unwrap()
+            .at;
         assert!((p[0] - (x - 23.6)).abs() < 0.12, "{p:?} at {x}");
     }
     // A sloping line (a general rig): the match 23.6 px left and 2.36 px up.
@@ -179,7 +183,7 @@ fn row_search_finds_the_disparity_and_refuses_a_repeated_texture() {
         assert!((guess[1] - 27.64).abs() <= 0.05, "{guess:?} at {x}");
         // The two-axis refinement is a single fit, without the row's re-centring: up to
         // 0.35 px across the row on this texture.
-        let p = refine_checked(&gli, &gri, [x, 30.0], guess, &free)
+        let p = refine_checked(&mut Correlator::new(), &gli, &gri, [x, 30.0], guess, &free)
             .unwrap()
             .at;
         assert!(
@@ -351,10 +355,19 @@ fn a_recentred_correlation_does_not_lean_towards_its_start() {
             .fold((f32::MAX, f32::MIN), |a, &x| (a.0.min(x), a.1.max(x)));
         hi - lo
     };
-    let single = spread(&|s| refine::correlate(&tpl, 4, &ri, s, (2, 0), 0.9).unwrap().at);
+    let single = spread(&|s| {
+        refine::Correlator::new()
+            .correlate(&tpl, 4, &ri, s, (2, 0), 0.9)
+            .unwrap()
+            .at
+    });
     let centred = spread(&|s| {
-        let found = refine::correlate(&tpl, 4, &ri, s, (2, 0), 0.9).unwrap();
-        refine::recentre(&tpl, 4, &ri, found, (1, 0), 0.9).at
+        let found = refine::Correlator::new()
+            .correlate(&tpl, 4, &ri, s, (2, 0), 0.9)
+            .unwrap();
+        refine::Correlator::new()
+            .recentre(&tpl, 4, &ri, found, (1, 0), 0.9)
+            .at
     });
     // Measured: 0.032 px from the single fit, 0.002 px re-centred.
     assert!(single > 0.02, "single fit: {single} px");
@@ -426,7 +439,9 @@ fn correlate_agrees_with_a_direct_ncc_at_every_search_size() {
         } else {
             0.0
         };
-        let found = refine::correlate(&tpl, half, &iv, start, (rx, ry), 0.5).unwrap();
+        let found = refine::Correlator::new()
+            .correlate(&tpl, half, &iv, start, (rx, ry), 0.5)
+            .unwrap();
         let (p, peak) = (found.at, found.score);
         let what = std::format!("half {half}, radius ({rx}, {ry})");
         assert!(
@@ -476,7 +491,9 @@ fn a_peak_reports_the_precision_of_its_match() {
             let (x, y) = (30.0 + 1.5 * i as f32, 20.0 + (i % 4) as f32 * 5.0);
             let mut tpl = [0f32; refine::TEMPLATE_LEN];
             refine::sample_template(&li, [x, y], 4, &mut tpl).unwrap();
-            let Ok(p) = refine::correlate(&tpl, 4, &ri, [x - 10.0, y], (2, 0), 0.5) else {
+            let Ok(p) =
+                refine::Correlator::new().correlate(&tpl, 4, &ri, [x - 10.0, y], (2, 0), 0.5)
+            else {
                 continue;
             };
             assert!(p.sigma[0].is_finite() && p.sigma[0] > 0.0, "{p:?}");
@@ -520,6 +537,8 @@ fn a_peak_reports_the_precision_of_its_match() {
     let (li, ri) = (view(&left, w, h), view(&right, w, h));
     let mut tpl = [0f32; refine::TEMPLATE_LEN];
     refine::sample_template(&li, [60.0, 30.0], 4, &mut tpl).unwrap();
-    let p = refine::correlate(&tpl, 4, &ri, [50.0, 30.0], (2, 0), 0.5).unwrap();
+    let p = refine::Correlator::new()
+        .correlate(&tpl, 4, &ri, [50.0, 30.0], (2, 0), 0.5)
+        .unwrap();
     assert!(p.sigma[0] > 0.0 && p.sigma[1] == p.sigma[0], "{p:?}");
 }
