@@ -53,7 +53,7 @@ const MIN_CURVATURE: f32 = 1e-4;
 /// sampling.
 const MIN_MISMATCH: f32 = 1e-4;
 
-/// The search of the right position around `right` (as [`refine_match_in`]), then the
+/// The search of the right position around `right` (as [`refine_match`]), then the
 /// left-right check of [`RefineConfig::back_check_px`].
 ///
 /// On a rectified rig (`rows_only`) the position returned is then re-centred
@@ -79,7 +79,7 @@ pub fn refine_checked(
             min_ncc: f32::MIN,
             ..*cfg
         };
-        let q = refine_match_in(buf, right_img, left_img, p, left, &back_cfg)
+        let q = refine_match(buf, right_img, left_img, p, left, &back_cfg)
             .map_err(|e| {
                 if e == RefineError::Border {
                     e
@@ -190,28 +190,9 @@ fn vertex(a: f32, b: f32, c: f32, cnt: f32) -> (f32, f32) {
     (offset, sigma)
 }
 
-/// The search alone, without the check (the tests of the correlation).
-#[cfg(test)]
-pub fn refine_match(
-    left_img: &ImageView<'_>,
-    right_img: &ImageView<'_>,
-    left: [f32; 2],
-    right: [f32; 2],
-    cfg: &RefineConfig,
-) -> Result<Peak, RefineError> {
-    refine_match_in(
-        &mut Correlator::new(),
-        left_img,
-        right_img,
-        left,
-        right,
-        cfg,
-    )
-}
-
 /// Refines the right position `right` of the left point `left` in the buffers `buf`:
 /// the refined right position with the NCC peak and its precision.
-fn refine_match_in(
+pub fn refine_match(
     buf: &mut Correlator,
     left_img: &ImageView<'_>,
     right_img: &ImageView<'_>,
@@ -235,7 +216,7 @@ fn left_template(
     Ok((tpl, h))
 }
 
-/// The search of [`refine_match_in`] with the left template (half-size `h`) sampled.
+/// The search of [`refine_match`] with the left template (half-size `h`) sampled.
 fn search_right(
     buf: &mut Correlator,
     tpl: &[f32; TEMPLATE_LEN],
@@ -579,6 +560,9 @@ impl Correlator {
     /// with `img` at whole-pixel offsets up to `(rx, ry)` around `centre`; a parabola
     /// through the peak and its neighbours gives the sub-pixel position on each
     /// searched axis.
+    ///
+    /// The region's columns past the searched width keep what an earlier search left
+    /// there: only the lanes of offsets beyond the search read them, and those are dropped.
     pub fn correlate(
         &mut self,
         tpl: &[f32; TEMPLATE_LEN],
@@ -588,81 +572,66 @@ impl Correlator {
         (rx, ry): (usize, usize),
         min_ncc: f32,
     ) -> Result<Peak, RefineError> {
-        search(self, tpl, h, img, centre, (rx, ry), min_ncc)
-    }
-}
-
-/// The body of [`Correlator::correlate`]. The region's columns past the searched width
-/// keep what an earlier search left there: only the lanes of offsets beyond the search
-/// read them, and those are dropped.
-fn search(
-    buf: &mut Correlator,
-    tpl: &[f32; TEMPLATE_LEN],
-    h: usize,
-    img: &ImageView<'_>,
-    centre: [f32; 2],
-    (rx, ry): (usize, usize),
-    min_ncc: f32,
-) -> Result<Peak, RefineError> {
-    let h = h.min(MAX_REFINE_HALF);
-    let (rx, ry) = (rx.min(MAX_REFINE_RADIUS), ry.min(MAX_REFINE_RADIUS));
-    let (n, hf) = (2 * h + 1, h as f32);
-    let reach = hf + rx.max(ry) as f32 + 1.0;
-    if !centre.iter().all(|v| v.is_finite()) || !inside(img, centre[0], centre[1], reach) {
-        return Err(RefineError::Border);
-    }
-    let cnt = (n * n) as f32;
-    let Some((zt, tnorm)) = zero_mean(tpl, n) else {
-        return Err(RefineError::Flat);
-    };
-    // Every position of the search shares the fractional part of `centre`: sample the
-    // region once (bilinear) and slide the template over it by whole pixels.
-    let (rw, rh) = (n + 2 * rx, n + 2 * ry);
-    let Correlator { region, score } = buf;
-    sample_region(
-        img,
-        [centre[0] - rx as f32 - hf, centre[1] - ry as f32 - hf],
-        (rw, rh),
-        region,
-    );
-    let mut best = (0usize, 0usize, f32::MIN);
-    let cols = 2 * rx + 1;
-    for oy in 0..=2 * ry {
-        let rows = &region[oy * R..];
-        let mut window = [[0f32; 3]; S];
-        match cols {
-            0..=4 => window_sums::<4>(rows, &zt, n, &mut window),
-            5..=8 => window_sums::<8>(rows, &zt, n, &mut window),
-            _ => window_sums::<S>(rows, &zt, n, &mut window),
+        let h = h.min(MAX_REFINE_HALF);
+        let (rx, ry) = (rx.min(MAX_REFINE_RADIUS), ry.min(MAX_REFINE_RADIUS));
+        let (n, hf) = (2 * h + 1, h as f32);
+        let reach = hf + rx.max(ry) as f32 + 1.0;
+        if !centre.iter().all(|v| v.is_finite()) || !inside(img, centre[0], centre[1], reach) {
+            return Err(RefineError::Border);
         }
-        for (ox, &[sum, sum2, cross]) in window[..cols].iter().enumerate() {
-            let ncc = ncc(sum, sum2, cross, cnt, tnorm);
-            score[oy * S + ox] = ncc;
-            if ncc > best.2 {
-                best = (ox, oy, ncc);
+        let cnt = (n * n) as f32;
+        let Some((zt, tnorm)) = zero_mean(tpl, n) else {
+            return Err(RefineError::Flat);
+        };
+        // Every position of the search shares the fractional part of `centre`: sample the
+        // region once (bilinear) and slide the template over it by whole pixels.
+        let (rw, rh) = (n + 2 * rx, n + 2 * ry);
+        let Correlator { region, score } = self;
+        sample_region(
+            img,
+            [centre[0] - rx as f32 - hf, centre[1] - ry as f32 - hf],
+            (rw, rh),
+            region,
+        );
+        let mut best = (0usize, 0usize, f32::MIN);
+        let cols = 2 * rx + 1;
+        for oy in 0..=2 * ry {
+            let rows = &region[oy * R..];
+            let mut window = [[0f32; 3]; S];
+            match cols {
+                0..=4 => window_sums::<4>(rows, &zt, n, &mut window),
+                5..=8 => window_sums::<8>(rows, &zt, n, &mut window),
+                _ => window_sums::<S>(rows, &zt, n, &mut window),
+            }
+            for (ox, &[sum, sum2, cross]) in window[..cols].iter().enumerate() {
+                let ncc = ncc(sum, sum2, cross, cnt, tnorm);
+                score[oy * S + ox] = ncc;
+                if ncc > best.2 {
+                    best = (ox, oy, ncc);
+                }
             }
         }
+        let (bx, by, peak) = best;
+        if peak < min_ncc {
+            return Err(RefineError::LowScore);
+        }
+        if bx == 0 || bx == 2 * rx || (ry > 0 && (by == 0 || by == 2 * ry)) {
+            return Err(RefineError::PeakOnEdge);
+        }
+        let at = |x: usize, y: usize| score[y * S + x];
+        let (dx, sx) = vertex(at(bx - 1, by), peak, at(bx + 1, by), cnt);
+        let (dy, sy) = if ry > 0 {
+            vertex(at(bx, by - 1), peak, at(bx, by + 1), cnt)
+        } else {
+            (0.0, sx)
+        };
+        Ok(Peak {
+            at: [
+                centre[0] + bx as f32 - rx as f32 + dx,
+                centre[1] + by as f32 - ry as f32 + dy,
+            ],
+            score: peak,
+            sigma: [sx, sy],
+        })
     }
-    let (bx, by, peak) = best;
-    if peak < min_ncc {
-        return Err(RefineError::LowScore);
-    }
-    if bx == 0 || bx == 2 * rx || (ry > 0 && (by == 0 || by == 2 * ry)) {
-        return Err(RefineError::PeakOnEdge);
-    }
-    let at = |x: usize, y: usize| score[y * S + x];
-    let (dx, sx) = vertex(at(bx - 1, by), peak, at(bx + 1, by), cnt);
-    let (dy, sy) = if ry > 0 {
-        vertex(at(bx, by - 1), peak, at(bx, by + 1), cnt)
-    } else {
-        (0.0, sx)
-    };
-    Ok(Peak {
-        at: [
-            centre[0] + bx as f32 - rx as f32 + dx,
-            centre[1] + by as f32 - ry as f32 + dy,
-        ],
-        score: peak,
-        sigma: [sx, sy],
-    })
 }

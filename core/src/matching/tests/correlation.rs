@@ -84,7 +84,7 @@ fn ncc_refinement_recovers_subpixel_disparity() {
     };
     for x in [40.0f32, 55.3, 70.8] {
         let start = [x - 10.0, 30.0]; // a keypoint 0.37 px off
-        let found = refine_match(&li, &ri, [x, 30.0], start, &cfg).unwrap();
+        let found = refine_match(&mut Correlator::new(), &li, &ri, [x, 30.0], start, &cfg).unwrap();
         let (p, score) = (found.at, found.score);
         assert!(score > 0.95);
         assert!(
@@ -99,16 +99,45 @@ fn ncc_refinement_recovers_subpixel_disparity() {
     let flat = vec![100u8; w * h];
     let fi = view(&flat, w, h);
     assert_eq!(
-        refine_match(&fi, &ri, [50.0, 30.0], [40.0, 30.0], &cfg),
+        refine_match(
+            &mut Correlator::new(),
+            &fi,
+            &ri,
+            [50.0, 30.0],
+            [40.0, 30.0],
+            &cfg
+        ),
         Err(refine::RefineError::Flat)
     );
     assert_eq!(
-        refine_match(&li, &ri, [2.0, 30.0], [1.0, 30.0], &cfg),
+        refine_match(
+            &mut Correlator::new(),
+            &li,
+            &ri,
+            [2.0, 30.0],
+            [1.0, 30.0],
+            &cfg
+        ),
         Err(refine::RefineError::Border)
     );
-    assert!(refine_match(&li, &ri, [50.0, 30.0], [45.0, 30.0], &cfg).is_err());
+    assert!(refine_match(
+        &mut Correlator::new(),
+        &li,
+        &ri,
+        [50.0, 30.0],
+        [45.0, 30.0],
+        &cfg
+    )
+    .is_err());
     assert_eq!(
-        refine_match(&li, &ri, [f32::NAN, 30.0], [45.0, 30.0], &cfg),
+        refine_match(
+            &mut Correlator::new(),
+            &li,
+            &ri,
+            [f32::NAN, 30.0],
+            [45.0, 30.0],
+            &cfg
+        ),
         Err(refine::RefineError::Border)
     );
 }

@@ -6,7 +6,7 @@ use std::vec::Vec;
 
 use super::config::NONE;
 use super::grid::Grid;
-use super::refine::refine_match;
+use super::refine::{refine_match, Correlator};
 use super::synthetic::{SyntheticScene, DISTRACTOR};
 use super::*;
 use crate::budget::{Arena, MemoryBudget};
