@@ -36,11 +36,12 @@ def subset(src, frames, dst):
             os.makedirs(os.path.join(dst, name))
             for f in sorted(os.listdir(path))[:frames]:
                 os.symlink(os.path.join(path, f), os.path.join(dst, name, f))
-        elif name in ("times.txt", "gt_poses.txt", "gnss.txt", "odometer.txt"):
+        elif name in ("times.txt", "gt_poses.txt"):
             with open(path) as fi, open(os.path.join(dst, name), "w") as fo:
-                lines = fi.readlines()
-                fo.writelines(lines[:frames] if name != "gnss.txt" else lines)
+                fo.writelines(fi.readlines()[:frames])
         else:
+            # gnss.txt and odometer.txt go whole: `run` matches them to the epochs'
+            # times and ignores what lies beyond the sequence.
             shutil.copy(path, dst)
 
 
