@@ -469,6 +469,14 @@ impl<'a> Matcher<'a> {
         (s, TemporalMode::Fallback)
     }
 
+    /// Replaces the rig of a general rig's stereo search ([`StereoGeometry::Rig`]) by
+    /// `rig`, a calibration corrected since; a rectified search keeps its rows.
+    pub fn set_rig(&mut self, rig: &Rig) {
+        if let StereoGeometry::Rig { rig: r, .. } = &mut self.cfg.stereo {
+            *r = *rig;
+        }
+    }
+
     /// Matches one epoch. `prev` must be the features passed as `cur` in the last
     /// accepted call (or `None` to start over: first epoch, or after a break).
     /// `motion` (the rig and the current left camera's pose in the previous left

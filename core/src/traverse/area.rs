@@ -15,7 +15,7 @@
 
 use super::patches::{PatchInfo, NO_ID};
 use super::Traverse;
-use crate::camera::{project_to_pixel, Pose};
+use crate::camera::{project_to_pixel, Pose, Rig};
 use crate::image::ImageView;
 use crate::matching::refine::{refine_checked, Correlator, TEMPLATE_LEN};
 use crate::matching::StereoPx;
@@ -100,6 +100,7 @@ impl Traverse<'_> {
         };
         let prev = [prev_left, self.right_of(&prev_left)];
         let cur = [*initial, self.right_of(initial)];
+        let rig = self.rig_now();
         // Descriptor and area tie points share the epoch's tie point capacity, which
         // sizes the window (TraverseConfig::fit_capacities).
         let descriptor_ties = self.matcher.tie_points().count();
@@ -132,7 +133,7 @@ impl Traverse<'_> {
             if self.matcher.tie_points().any(|t| t.prev.left == key) {
                 continue;
             }
-            let Some(([pl, pr], scale)) = self.predict(&prev, &cur, key, &info) else {
+            let Some(([pl, pr], scale)) = self.predict(&rig, (&prev, &cur), key, &info) else {
                 continue;
             };
             // From the anchor epoch, not the previous one, where the template was taken.
@@ -172,27 +173,27 @@ impl Traverse<'_> {
         }
     }
 
-    /// Current left and right pixel positions predicted for a template's point, and
-    /// its depths at the previous epoch and now (metres).
+    /// Current left and right pixel positions predicted for a template's point through
+    /// `rig` (the rig as adjusted), and its depths at the previous epoch and now (metres).
     fn predict(
         &self,
-        prev: &[Pose; 2],
-        cur: &[Pose; 2],
+        rig: &Rig,
+        (prev, cur): (&[Pose; 2], &[Pose; 2]),
         key: [f32; 2],
         info: &PatchInfo,
     ) -> Option<Prediction> {
         let xyz = if info.point != NO_ID {
             self.window.point(info.point)?
         } else {
-            super::intersect_pair(&self.cfg, prev, key, info.right)?
+            super::intersect_pair(&self.cfg, rig, prev, key, info.right)?
         };
         let depth = -cur[0].to_camera(&xyz)[2];
         let before = -prev[0].to_camera(&xyz)[2];
         if !(depth > 0.0 && depth <= self.cfg.max_depth_m && before > 0.0) {
             return None;
         }
-        let l = project_to_pixel(&cur[0], &self.cfg.rig.left, &xyz).ok()?;
-        let r = project_to_pixel(&cur[1], &self.cfg.rig.right, &xyz).ok()?;
+        let l = project_to_pixel(&cur[0], &rig.left, &xyz).ok()?;
+        let r = project_to_pixel(&cur[1], &rig.right, &xyz).ok()?;
         let px = |p: [f64; 2]| [p[0] as f32, p[1] as f32];
         Some(([px(l), px(r)], (before as f32, depth as f32)))
     }

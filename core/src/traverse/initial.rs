@@ -43,6 +43,7 @@ impl Traverse<'_> {
         let last = self.window.n_epochs().checked_sub(1)?;
         let prev_left = self.window.epoch_pose(last)?;
         let prev = [prev_left, self.right_of(&prev_left)];
+        let rig = self.rig_now();
         let cur = self.features[self.cur][0].keypoints();
         let prev_kps = self.features[1 - self.cur][0].keypoints();
         let mut n = 0;
@@ -52,7 +53,7 @@ impl Traverse<'_> {
             }
             let (Some(k), Some(xyz)) = (
                 cur.get(c as usize),
-                intersect_pair(&self.cfg, &prev, pl, pr),
+                intersect_pair(&self.cfg, &rig, &prev, pl, pr),
             ) else {
                 continue;
             };

@@ -40,7 +40,7 @@ use crate::adjust::geometry::camera_pose;
 use crate::adjust::quality::chi2_quantile;
 use crate::adjust::{intersect, resect, AdjustError, Correspondence, Observation, Ray, Window};
 use crate::budget::{Arena, OutOfMemory, Stage};
-use crate::camera::{angles_from_rotation, Camera, Pose};
+use crate::camera::{angles_from_rotation, Camera, Pose, Rig};
 use crate::features::FeatureSet;
 use crate::image::ImageView;
 use crate::matching::refine::{
@@ -311,6 +311,16 @@ impl<'a> Traverse<'a> {
         (self.window.rig(), self.window.rig_std())
     }
 
+    /// The rig as last adjusted: the calibration with the relative orientation and the
+    /// interior corrections that the calibration check (or the free estimation) found.
+    /// Every search and prediction in the images goes through it, so that a correction
+    /// reaches the matching and not the adjustment alone (`docs/traverse.md`,
+    /// Calibration check). The observations stay reduced with the calibration; the
+    /// window adds its corrections to them.
+    fn rig_now(&self) -> Rig {
+        self.window.adjusted_rig(&self.cfg.rig)
+    }
+
     /// Right camera pose for a left pose, with the rig as last adjusted.
     fn right_of(&self, left: &Pose) -> Pose {
         camera_pose(left, &self.window.rig(), Camera::Right)
@@ -486,12 +496,9 @@ impl<'a> Traverse<'a> {
             _ => None,
         };
         let images = Some((*left, *right));
-        // Predict the right positions with the rig as last adjusted (the calibration
-        // when it is not estimated).
-        let mut rig = self.cfg.rig;
-        let r = self.window.rig();
-        rig.relative_angles = r.angles;
-        rig.base_m = r.base;
+        // Search and predict the right positions with the rig as last adjusted.
+        let rig = self.rig_now();
+        self.matcher.set_rig(&rig);
         self.matcher
             .process_epoch(cur, prev, images, motion.as_ref().map(|m| (&rig, m)))
     }

@@ -208,7 +208,7 @@ fn epipolar_line(cfg: &TraverseConfig, window: &Window, at: [f32; 2]) -> Option<
             ..
         } => (min_depth_m.max(LINE_NEAR_M), max_depth_m.min(LINE_FAR_M)),
     };
-    let rig = &cfg.rig;
+    let rig = &window.adjusted_rig(&cfg.rig);
     let [x, y] = rig.left.pixel_to_corrected(at[0] as f64, at[1] as f64);
     let right = camera_pose(&Pose::default(), &window.rig(), Camera::Right);
     let seen_at = |depth: f64| {
@@ -255,7 +255,7 @@ fn stereo_depth(
 ) -> Option<f32> {
     let d = cfg.datum;
     let poses = [d, camera_pose(&d, &window.rig(), Camera::Right)];
-    let x = intersect_pair(cfg, &poses, left, right)?;
+    let x = intersect_pair(cfg, &window.adjusted_rig(&cfg.rig), &poses, left, right)?;
     Some(-d.to_camera(&x)[2] as f32)
 }
 

@@ -381,15 +381,16 @@ pub(super) fn add_stereo_observations(
 }
 
 /// Intersects a point from a stereo observation (`left` and `right` pixels) of the
-/// epoch with left and right poses `poses`; `None` when the rays barely intersect or
-/// the point is behind the camera or beyond `max_depth_m`.
+/// epoch with left and right poses `poses` through the cameras of `rig` (the rig as
+/// adjusted, [`Traverse::rig_now`]); `None` when the rays barely intersect or the point
+/// is behind the camera or beyond `max_depth_m`.
 pub(super) fn intersect_pair(
     cfg: &TraverseConfig,
+    rig: &Rig,
     poses: &[Pose; 2],
     left: [f32; 2],
     right: [f32; 2],
 ) -> Option<[f64; 3]> {
-    let rig = &cfg.rig;
     let ray = |pose: &Pose, interior: &crate::camera::Interior, px: [f32; 2]| Ray {
         pose: *pose,
         focal_mm: interior.focal_mm,
@@ -415,7 +416,8 @@ pub(super) fn new_point(
     tag: u32,
 ) -> Option<u32> {
     let (prev_id, poses) = at;
-    let xyz = intersect_pair(cfg, poses, obs.left, obs.right)?;
+    let rig = window.adjusted_rig(&cfg.rig);
+    let xyz = intersect_pair(cfg, &rig, poses, obs.left, obs.right)?;
     let point = window.add_point(xyz).ok()?;
     add_stereo_observations(cfg, window, prev_id, point, obs, tag);
     Some(point)

@@ -159,6 +159,26 @@ impl<'a> Window<'a> {
         self.interior
     }
 
+    /// `calibration` (the rig the window was built with) as the window has it now: its
+    /// relative orientation and the interior corrections applied, each camera's
+    /// principal point and focal length moved by its own (see [`InteriorCorrections`]).
+    /// The lens distortion stays the calibration's.
+    pub fn adjusted_rig(&self, calibration: &Rig) -> Rig {
+        let mut rig = *calibration;
+        rig.relative_angles = self.rig.angles;
+        rig.base_m = self.rig.base;
+        let focal = [calibration.left.focal_mm, calibration.right.focal_mm];
+        for (camera, interior) in [
+            (Camera::Left, &mut rig.left),
+            (Camera::Right, &mut rig.right),
+        ] {
+            interior.principal_point_mm =
+                shift_principal_point(interior.principal_point_mm, camera, &self.interior);
+            interior.focal_mm = corrected_focal(focal, camera, &self.interior);
+        }
+        rig
+    }
+
     /// Standard deviations of [`Self::interior`] (zero without self-calibration).
     pub fn interior_std(&self) -> [f64; 6] {
         self.interior_std
