@@ -291,17 +291,19 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
     /// Declares lost every packet in flight sent before the transmission
     /// `order`: the peer answered a probe sent after them and does not hold them.
     pub fn lost_before(&mut self, order: u32) -> usize {
-        self.declare_lost(|s| (s.order.wrapping_sub(order) as i32) < 0)
+        self.declare_lost(0, |s| (s.order.wrapping_sub(order) as i32) < 0)
     }
 
     /// Declares lost every packet in flight last sent at or before `time`.
     pub fn lost_sent_by(&mut self, time: u64) -> usize {
-        self.declare_lost(|s| s.sent_at.is_some_and(|t| t <= time))
+        self.declare_lost(0, |s| s.sent_at.is_some_and(|t| t <= time))
     }
 
-    fn declare_lost(&mut self, lost_if: impl Fn(&Slot) -> bool) -> usize {
+    /// Declares lost every packet in flight from the `from`-th held one on for which
+    /// `lost_if` holds: the one place where a packet becomes lost, so the tally follows.
+    fn declare_lost(&mut self, from: usize, lost_if: impl Fn(&Slot) -> bool) -> usize {
         let mut lost = 0;
-        for k in 0..self.count {
+        for k in from..self.count {
             let i = self.slot_at(k);
             let s = &mut self.state[i];
             if s.sent_at.is_some() && !s.sacked && !s.lost && lost_if(s) {
@@ -316,22 +318,12 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
     /// Declares lost the packets sent enough transmissions before the latest one
     /// delivered; with fewer packets in flight after it, any later delivery will do.
     fn mark_lost(&mut self, latest_delivered: u32) -> usize {
-        let mut lost = 0;
-        for k in 0..self.count {
-            let i = self.slot_at(k);
-            let s = &mut self.state[i];
-            if s.sacked || s.lost || s.sent_at.is_none() {
-                continue;
-            }
-            let after = self.transmissions.wrapping_sub(s.order).saturating_sub(1);
+        let transmissions = self.transmissions;
+        self.declare_lost(0, |s| {
+            let after = transmissions.wrapping_sub(s.order).saturating_sub(1);
             let delivered_after = latest_delivered.wrapping_sub(s.order) as i32;
-            if delivered_after >= REORDER_THRESHOLD.min(after.max(1)) as i32 {
-                s.lost = true;
-                lost += 1;
-            }
-        }
-        self.tally.lost += lost;
-        lost
+            delivered_after >= REORDER_THRESHOLD.min(after.max(1)) as i32
+        })
     }
 
     /// The next packet to put on the wire at `now`: lost packets first, then
@@ -418,14 +410,7 @@ impl<B: AsMut<[u8]> + AsRef<[u8]>> TxWindow<B> {
     /// for them again).
     pub fn resend_from(&mut self, from: u16) {
         let skip = seq_diff(from, self.base).clamp(0, self.count as i16) as usize;
-        for k in skip..self.count {
-            let i = self.slot_at(k);
-            let s = &mut self.state[i];
-            if !s.sacked && s.sent_at.is_some() && !s.lost {
-                s.lost = true;
-                self.tally.lost += 1;
-            }
-        }
+        self.declare_lost(skip, |_| true);
     }
 }
 

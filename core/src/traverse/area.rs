@@ -202,6 +202,7 @@ impl Traverse<'_> {
     /// `prev_id` with poses `prev`): points they already are get the new observations,
     /// the others are intersected from the previous stereo pair first.
     pub(super) fn add_area_ties(&mut self, id: u32, (prev_id, prev): (u32, &[Pose; 2])) -> u32 {
+        let rig = self.rig_now();
         let mut new_points = 0;
         for a in 0..self.n_area {
             let t = self.area[a];
@@ -220,7 +221,8 @@ impl Traverse<'_> {
                 };
                 let tag = self.matcher.new_track_id();
                 let at = (prev_id, prev);
-                let Some(point) = super::new_point(&self.cfg, &mut self.window, at, p, tag) else {
+                let geometry = (&self.cfg, &rig);
+                let Some(point) = super::new_point(geometry, &mut self.window, at, p, tag) else {
                     continue;
                 };
                 new_points += 1;

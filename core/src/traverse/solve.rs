@@ -137,6 +137,7 @@ impl Traverse<'_> {
             return 0;
         };
         let prev = [prev_left, self.right_of(&prev_left)];
+        let rig = self.rig_now();
         let mut new_points = 0;
         for (k, tie) in self.matcher.tie_points().enumerate() {
             // Two tracks whose templates led to one spot observe one image point: the
@@ -160,7 +161,8 @@ impl Traverse<'_> {
                 None => {
                     let at = (prev_id, &prev);
                     let obs = tie.prev.px();
-                    let Some(p) = new_point(&self.cfg, &mut self.window, at, obs, tie.track_id)
+                    let geometry = (&self.cfg, &rig);
+                    let Some(p) = new_point(geometry, &mut self.window, at, obs, tie.track_id)
                     else {
                         continue;
                     };
@@ -406,18 +408,17 @@ pub(super) fn intersect_pair(
 }
 
 /// Intersects a new tie point from its stereo observation `obs` at the previous epoch
-/// (`at`: its window epoch id and its left and right poses) and adds it with those two
-/// observations, tagged `tag`.
+/// (`at`: its window epoch id and its left and right poses) through `rig` (the rig as
+/// adjusted) and adds it with those two observations, tagged `tag`.
 pub(super) fn new_point(
-    cfg: &TraverseConfig,
+    (cfg, rig): (&TraverseConfig, &Rig),
     window: &mut Window,
     at: (u32, &[Pose; 2]),
     obs: StereoPx,
     tag: u32,
 ) -> Option<u32> {
     let (prev_id, poses) = at;
-    let rig = window.adjusted_rig(&cfg.rig);
-    let xyz = intersect_pair(cfg, &rig, poses, obs.left, obs.right)?;
+    let xyz = intersect_pair(cfg, rig, poses, obs.left, obs.right)?;
     let point = window.add_point(xyz).ok()?;
     add_stereo_observations(cfg, window, prev_id, point, obs, tag);
     Some(point)
