@@ -13,9 +13,9 @@ use super::motion::{check_motion, QuadObs};
 use super::predict::predict_positions;
 use super::quad::{close_loops, LoopDistances, Quad, QuadStats};
 use super::refine::{refine_checked, Correlator, RefineError};
-use super::search::{match_pass, Best, Features, PairStats, PassParams};
+use super::search::{match_pass, Best, Features, PairStats, PassParams, SearchRegion};
 use super::spread::spread;
-use super::stereo::{RectifiedBand, RigBand};
+use super::stereo::{BinnedMedian, EpipolarOffset, RectifiedBand, RigBand};
 use super::temporal::GuidedWindow;
 use super::tracks::{Observation, StereoPx, TrackStats, Tracks};
 use crate::budget::Arena;
@@ -346,6 +346,71 @@ impl<'a> Matcher<'a> {
             }
         }
         stats
+    }
+
+    /// Where the right keypoints of a general rig's pair lie across their epipolar
+    /// lines: descriptor matches in a band `widen_px` wider than the configured one,
+    /// their median distance from the lines (`None` with a rectified search or fewer
+    /// than `min_matches`). The configured band keeps only the matches whose noise
+    /// leans towards the lines when the calibration puts the lines a pixel or two off,
+    /// so what it keeps cannot show the offset; the wider band can. Uses the
+    /// current-epoch buffers as scratch (the next [`Matcher::process_epoch`]
+    /// overwrites them).
+    pub fn epipolar_offset(
+        &mut self,
+        pair: StereoFeatures<'_>,
+        widen_px: f32,
+        min_matches: usize,
+    ) -> Option<EpipolarOffset> {
+        let StereoGeometry::Rig {
+            rig,
+            tolerance_px,
+            min_depth_m,
+            max_depth_m,
+        } = self.cfg.stereo
+        else {
+            return None;
+        };
+        let n = self.cfg.max_keypoints;
+        let (nl, nr) = (pair.left.usable(n), pair.right.usable(n));
+        let right = Features::new(&pair.right.keypoints[..nr], &pair.right.descriptors[..nr]);
+        self.grid.build(right.keypoints);
+        RigBand::correct_keypoints(&rig.right, right.keypoints, self.corrected);
+        let band = RigBand::new(
+            &rig,
+            tolerance_px + widen_px,
+            min_depth_m,
+            max_depth_m,
+            &self.corrected[..nr],
+        );
+        let params = self.params();
+        let out = &mut *self.cur.right_of;
+        match_pass(
+            &band, pair.left, right, nl, &self.grid, params, self.qbest, self.tbest, out,
+        );
+        // The current-epoch buffers hold no stereo results now.
+        self.stereo_in_cur = false;
+        let px = rig.right.pixel_size_mm[1];
+        let mut median = BinnedMedian::new((tolerance_px + widen_px) as f64);
+        let mut normal = [0.0; 2];
+        for (i, &j) in out[..nl].iter().enumerate() {
+            let query = (j != NONE)
+                .then(|| band.prepare(i, &pair.left.keypoints[i]))
+                .flatten();
+            if let Some((d, nv)) = query.and_then(|(_, q)| band.across(&q, j as usize)) {
+                median.add(d / px);
+                normal = [normal[0] + nv[0], normal[1] + nv[1]];
+            }
+        }
+        let norm = libm::sqrt(normal[0] * normal[0] + normal[1] * normal[1]);
+        if median.count() < min_matches.max(1) || norm.is_nan() || norm <= 0.0 {
+            return None;
+        }
+        Some(EpipolarOffset {
+            median_px: median.median()?,
+            normal: [normal[0] / norm, normal[1] / norm],
+            matches: median.count() as u32,
+        })
     }
 
     /// Stereo matches of one pair only (no temporal state is touched except the

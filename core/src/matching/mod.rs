@@ -33,4 +33,5 @@ pub use matcher::{
 pub use predict::{predict_positions, relative_motion, triangulate};
 pub use quad::{Quad, QuadStats};
 pub use search::{Best, Features, PairStats};
+pub use stereo::EpipolarOffset;
 pub use tracks::{Observation, StereoPx, Track, TrackStats};

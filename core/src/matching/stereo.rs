@@ -119,6 +119,16 @@ impl<'c> RigBand<'c> {
     }
 }
 
+impl RigBand<'_> {
+    /// Signed distance (mm) of right keypoint `ti` from the line of `q`, and the line's
+    /// unit normal: the right point sits at its line plus `distance * normal`.
+    pub fn across(&self, q: &RigQuery, ti: usize) -> Option<(f64, [f64; 2])> {
+        let &[x, y] = self.right_corrected.get(ti)?;
+        let d = q.line[0] * x as f64 + q.line[1] * y as f64 + q.line[2];
+        Some((d, [q.line[0], q.line[1]]))
+    }
+}
+
 impl SearchRegion for RigBand<'_> {
     type Query = RigQuery;
 
@@ -179,5 +189,89 @@ impl SearchRegion for RigBand<'_> {
         let along = (x - q.near[0]) * sx + (y - q.near[1]) * sy;
         let slack = self.tol_mm * libm::sqrt(len2);
         along >= -slack && along <= len2 + slack
+    }
+}
+
+/// Where the right keypoints lie across their epipolar lines
+/// ([`super::Matcher::epipolar_offset`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EpipolarOffset {
+    /// Median signed distance from the lines, pixels, along `normal`.
+    pub median_px: f64,
+    /// The lines' mean unit normal in the right camera's photo-coordinates.
+    pub normal: [f64; 2],
+    /// Matches the median is taken over.
+    pub matches: u32,
+}
+
+/// A median over a bounded range without storing the values: counts in bins of
+/// `BinnedMedian::STEP` pixels, the median interpolated within its bin.
+pub(crate) struct BinnedMedian {
+    counts: [u16; BinnedMedian::BINS],
+    low: f64,
+    n: usize,
+}
+
+impl BinnedMedian {
+    const BINS: usize = 200;
+    const STEP: f64 = 0.05;
+
+    /// Values within `+- half_width` pixels (the band: nothing lies outside it).
+    pub(crate) fn new(half_width: f64) -> Self {
+        let half = half_width.min(Self::BINS as f64 * Self::STEP / 2.0);
+        BinnedMedian {
+            counts: [0; Self::BINS],
+            low: -half,
+            n: 0,
+        }
+    }
+
+    pub(crate) fn add(&mut self, v: f64) {
+        if !v.is_finite() {
+            return;
+        }
+        let b = ((v - self.low) / Self::STEP).max(0.0) as usize;
+        let b = b.min(Self::BINS - 1);
+        self.counts[b] = self.counts[b].saturating_add(1);
+        self.n += 1;
+    }
+
+    pub(crate) fn count(&self) -> usize {
+        self.n
+    }
+
+    pub(crate) fn median(&self) -> Option<f64> {
+        let half = self.n as f64 / 2.0;
+        let mut below = 0.0;
+        for (b, &c) in self.counts.iter().enumerate() {
+            let c = c as f64;
+            if c > 0.0 && below + c >= half {
+                let frac = (half - below) / c;
+                return Some(self.low + (b as f64 + frac) * Self::STEP);
+            }
+            below += c;
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::BinnedMedian;
+
+    #[test]
+    fn binned_median_interpolates_within_its_bin() {
+        let mut m = BinnedMedian::new(5.0);
+        assert_eq!(m.median(), None);
+        for v in [1.52, 1.48, -4.0, 1.51, 9.0, 1.49, 1.5, f64::NAN] {
+            m.add(v);
+        }
+        // The non-finite value is not counted; those beyond the range count at its ends.
+        assert_eq!(m.count(), 7);
+        let median = m.median().unwrap();
+        assert!((median - 1.5).abs() <= BinnedMedian::STEP, "{median}");
+        let mut flat = BinnedMedian::new(2.0);
+        (0..100).for_each(|i| flat.add(-2.0 + 0.04 * i as f64));
+        assert!(flat.median().unwrap().abs() < 0.05);
     }
 }

@@ -105,8 +105,11 @@ pub struct TraverseConfig {
 /// so a good calibration never moves; after each epoch's adjustment a score test
 /// ([`crate::adjust::Window::calibration_test`]) asks whether freeing them would
 /// lower `vTPv` significantly, and only then the correction it gives is applied.
-/// A calibration that needed no correction in the first `epochs` epochs is held as
-/// given for the rest of the traverse and its blocks leave the adjustment.
+/// Before the first matching, a stereo pair a pixel or more off its epipolar lines is
+/// corrected too (`EPIPOLAR_OFFSET_MIN_PX`). A corrected calibration is estimated in
+/// every adjustment from then on. After `epochs` epochs the calibration, held or
+/// estimated, is kept as it is for the rest of the traverse and its blocks leave the
+/// adjustment.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CalibrationCheck {
     /// Epochs over which a calibration is tested before it is accepted as it is.
@@ -130,8 +133,13 @@ pub const CALIBRATION_CHECK_LEVEL: f64 = 1e-3;
 pub const CALIBRATION_MIN_EFFECT_PX: f64 = 0.1;
 /// Consecutive rejections before a correction ([`CalibrationCheck::persistence`]).
 pub const CALIBRATION_PERSISTENCE: u32 = 2;
-/// Most correction steps at one epoch (see `Traverse::solve`).
-pub const CALIBRATION_STEPS: usize = 3;
+/// How much wider than the stereo band the band is in which the calibration check
+/// measures the pairs' offset from their epipolar lines, pixels.
+pub const EPIPOLAR_PROBE_WIDEN_PX: f32 = 3.0;
+/// Fewest matches that offset is measured from.
+pub const EPIPOLAR_PROBE_MATCHES: usize = 30;
+/// Smallest offset from the epipolar lines the check corrects, pixels.
+pub const EPIPOLAR_OFFSET_MIN_PX: f64 = 1.0;
 /// Smallest a-posteriori sigma0 the calibration test divides by.
 pub const CALIBRATION_TEST_MIN_SIGMA0: f64 = 0.05;
 

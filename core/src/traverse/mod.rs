@@ -17,6 +17,7 @@
 //! ([`TraverseConfig::budget`] predicts it); processing allocates nothing.
 
 mod area;
+mod calibration;
 pub(crate) mod config;
 pub mod defaults;
 mod initial;
@@ -207,6 +208,9 @@ pub struct Traverse<'a> {
     calibration_corrections: u32,
     /// Consecutive epochs whose calibration test rejected the calibration.
     calibration_rejections: u32,
+    /// The stereo pairs' offset from their epipolar lines has been measured
+    /// (`Traverse::check_epipolar_offset`).
+    epipolar_offset_checked: bool,
     /// The odometer count (distance, variance) of the newest window epoch, if it had one.
     odometer_count: Option<(f64, f64)>,
 }
@@ -264,6 +268,7 @@ impl<'a> Traverse<'a> {
             last_solve_error: None,
             calibration_corrections: 0,
             calibration_rejections: 0,
+            epipolar_offset_checked: false,
             odometer_count: None,
         })
     }
@@ -365,6 +370,9 @@ impl<'a> Traverse<'a> {
         }
         let t1 = clock.now_us();
 
+        if self.check_epipolar_offset(fill) {
+            out.flags |= flags::CALIBRATION_CORRECTED;
+        }
         let report = match self.match_epoch(fill, left, right, &prediction) {
             Ok(r) => r,
             Err(_) => {
@@ -475,21 +483,10 @@ impl<'a> Traverse<'a> {
         right: &ImageView,
         prediction: &Pose,
     ) -> Result<crate::matching::EpochReport, MatchError> {
-        fn view<'k>(f: &'k FeatureSet) -> Features<'k> {
-            Features::new(f.keypoints(), f.descriptors())
-        }
-        let [cl, cr] = &self.features[fill];
-        let cur = StereoFeatures {
-            left: view(cl),
-            right: view(cr),
-        };
-        let prev = self.have_prev.then(|| {
-            let [pl, pr] = &self.features[1 - fill];
-            StereoFeatures {
-                left: view(pl),
-                right: view(pr),
-            }
-        });
+        let cur = stereo_pair(&self.features[fill]);
+        let prev = self
+            .have_prev
+            .then(|| stereo_pair(&self.features[1 - fill]));
         // A motion guide needs a velocity: two epochs behind.
         let motion = match self.history {
             [Some(_), Some(last)] => Some(relative_motion(&last.pose, prediction)),
@@ -506,6 +503,14 @@ impl<'a> Traverse<'a> {
     /// Corrections the calibration check has applied so far.
     pub fn calibration_corrections(&self) -> u32 {
         self.calibration_corrections
+    }
+}
+
+/// A left and a right image's features as a stereo pair.
+fn stereo_pair<'k>([l, r]: &'k [FeatureSet<'_>; 2]) -> StereoFeatures<'k> {
+    StereoFeatures {
+        left: Features::new(l.keypoints(), l.descriptors()),
+        right: Features::new(r.keypoints(), r.descriptors()),
     }
 }
 

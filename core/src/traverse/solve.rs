@@ -1,5 +1,5 @@
 //! The epoch in the adjustment: its tie points as observations (new points by
-//! intersection), the window's solution, the slide, and the calibration check.
+//! intersection), the window's solution and the slide.
 use super::*;
 use crate::adjust::{right_camera_covariance, standard_deviations};
 
@@ -194,11 +194,9 @@ impl Traverse<'_> {
             result = self.window.solve();
         }
         let Ok(mut rep) = result else { return false };
-        // A correction is one Gauss-Newton step of the freed calibration: repeated on
-        // the re-adjusted window until the test accepts it.
-        let mut steps = 0;
-        while steps < config::CALIBRATION_STEPS && self.check_calibration(rep.sigma0, steps > 0) {
-            steps += 1;
+        // A rejected calibration is corrected and freed: the window is adjusted again,
+        // the calibration with it.
+        if self.check_calibration(rep.sigma0) {
             out.flags |= flags::CALIBRATION_CORRECTED;
             match self.window.solve() {
                 Ok(r) => rep = r,
@@ -235,47 +233,6 @@ impl Traverse<'_> {
             out.flags |= flags::CHI2;
         }
         true
-    }
-
-    /// The calibration check ([`config::CalibrationCheck`]) after an adjustment whose
-    /// a-posteriori sigma is `sigma0`: corrects the held calibration when the score
-    /// test rejects it and the correction matters (returns true: the window must be
-    /// adjusted again), and holds it as it is for good after `epochs` epochs.
-    /// `again`: the calibration was just corrected at this epoch; a rejection now
-    /// continues that correction without waiting for `persistence`.
-    fn check_calibration(&mut self, sigma0: f64, again: bool) -> bool {
-        let Some(check) = self.cfg.calibration_check else {
-            return false;
-        };
-        if !self.window.calibration_active() {
-            return false;
-        }
-        // A test that cannot be computed (a singular system) corrects nothing. The
-        // floor keeps noise-free data (sigma0 near zero) from magnifying rounding
-        // into a rejection; real matching stays well above it (0.17 to 0.35 on the
-        // rendered streets).
-        let sigma0 = sigma0.max(config::CALIBRATION_TEST_MIN_SIGMA0);
-        if let Ok(test) = self.window.calibration_test(sigma0) {
-            let critical = chi2_quantile(1.0 - check.level, test.dof as f64);
-            let px = self.cfg.rig.right.pixel_size_mm[0];
-            let rejected = test.statistic > critical
-                && self.window.correction_effect(&test) > check.min_effect_px * px;
-            self.calibration_rejections = if rejected {
-                self.calibration_rejections + 1
-            } else {
-                0
-            };
-            if self.calibration_rejections >= check.persistence || (again && rejected) {
-                self.window.correct_calibration(&test);
-                self.calibration_corrections += 1;
-                self.calibration_rejections = 0;
-                return true;
-            }
-        }
-        if self.epochs >= check.epochs && !again {
-            self.window.drop_calibration();
-        }
-        false
     }
 
     /// RMS image residual of the window's unflagged observations, pixels.

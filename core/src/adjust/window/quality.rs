@@ -310,12 +310,23 @@ impl<'a> Window<'a> {
         }
     }
 
+    /// Frees a held calibration: from the next solve on, every adjustment estimates it
+    /// within its priors, as [`AdjustConfig::estimate_rig`] does from the start.
+    pub fn free_calibration(&mut self) {
+        self.calibration_held = false;
+    }
+
     /// Takes the rig and interior blocks out of the adjustment for good, keeping their
     /// values: the calibration was tested long enough and needs no correction, and
     /// each solve saves their partial derivatives.
     pub fn drop_calibration(&mut self) {
         self.calibration_active = false;
         self.rig_cov_valid = false;
+    }
+
+    /// Whether the calibration is held at its values (tested, not estimated).
+    pub fn calibration_held(&self) -> bool {
+        self.calibration_held && self.calibration_active()
     }
 
     /// Whether the rig and interior blocks still take part (held or free).

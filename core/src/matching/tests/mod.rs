@@ -272,6 +272,59 @@ fn general_rig_with_distortion_and_rotation() {
     );
 }
 
+/// The offset of a pair from its epipolar lines, measured in a wider band than the
+/// search's: exact (to the median's bin) on a shifted right image, zero on the true
+/// geometry, none for a rectified search.
+#[test]
+fn epipolar_offset_measures_a_shifted_right_image() {
+    let cam = crate::testkit::test_camera();
+    let rig = Rig {
+        left: cam,
+        right: cam,
+        relative_angles: [0.01, -0.04, 0.02],
+        base_m: [0.5, 0.02, -0.01],
+    };
+    let scene = SyntheticScene::street(11);
+    let mut e = epoch(&scene, &rig, &pose_at(0.0), 0);
+    let cfg = MatchConfig {
+        stereo: StereoGeometry::Rig {
+            rig,
+            tolerance_px: 2.0,
+            min_depth_m: 2.0,
+            max_depth_m: f64::INFINITY,
+        },
+        ..config()
+    };
+    let mut store = storage(&cfg);
+    let mut arena = Arena::new(&mut store);
+    let mut m = Matcher::new(cfg, &mut arena).unwrap();
+    let true_geometry = m.epipolar_offset(e.features(), 3.0, 30).unwrap();
+    assert!(true_geometry.matches > 100, "{true_geometry:?}");
+    assert!(true_geometry.median_px.abs() < 0.1, "{true_geometry:?}");
+    // The right camera's principal point 2.5 px off vertically: every right point moves
+    // down the image (photo-coordinates have y up), across lines along the rows.
+    for k in &mut e.right.kps {
+        k.y += 2.5;
+    }
+    let shifted = m.epipolar_offset(e.features(), 3.0, 30).unwrap();
+    assert!(shifted.normal[1].abs() > 0.99, "{shifted:?}");
+    let down = -shifted.median_px * shifted.normal[1];
+    assert!((down - 2.5).abs() < 0.1, "{shifted:?}");
+    assert!(
+        shifted.matches * 10 > true_geometry.matches * 9,
+        "{shifted:?}"
+    );
+    // The search band (2 px) keeps none of these noise-free points.
+    let kept = m.match_stereo(e.features(), None).pass.matches;
+    assert!(kept * 10 < shifted.matches, "{kept} of {shifted:?}");
+    // Too few matches, or a rectified search: nothing measured.
+    assert_eq!(m.epipolar_offset(e.features(), 3.0, 10_000), None);
+    let mut rect_store = storage(&config());
+    let mut rect_arena = Arena::new(&mut rect_store);
+    let mut rect = Matcher::new(config(), &mut rect_arena).unwrap();
+    assert_eq!(rect.epipolar_offset(e.features(), 3.0, 30), None);
+}
+
 #[test]
 fn triangulate_and_predict_are_exact() {
     let rig = Rig {
