@@ -296,14 +296,9 @@ impl<'a> Matcher<'a> {
                 min_depth_m,
                 max_depth_m,
             } => {
-                RigBand::correct_keypoints(&rig.right, right.keypoints, self.corrected);
-                let band = RigBand::new(
-                    &rig,
-                    tolerance_px,
-                    min_depth_m,
-                    max_depth_m,
-                    &self.corrected[..nr],
-                );
+                let depth = (min_depth_m, max_depth_m);
+                let band =
+                    RigBand::over(&rig, tolerance_px, depth, right.keypoints, self.corrected);
                 match_pass(
                     &band,
                     pair.left,
@@ -375,15 +370,10 @@ impl<'a> Matcher<'a> {
         let (nl, nr) = (pair.left.usable(n), pair.right.usable(n));
         let right = Features::new(&pair.right.keypoints[..nr], &pair.right.descriptors[..nr]);
         self.grid.build(right.keypoints);
-        RigBand::correct_keypoints(&rig.right, right.keypoints, self.corrected);
-        let band = RigBand::new(
-            &rig,
-            tolerance_px + widen_px,
-            min_depth_m,
-            max_depth_m,
-            &self.corrected[..nr],
-        );
+        let depth = (min_depth_m, max_depth_m);
+        let tolerance = tolerance_px + widen_px;
         let params = self.params();
+        let band = RigBand::over(&rig, tolerance, depth, right.keypoints, self.corrected);
         let out = &mut *self.cur.right_of;
         match_pass(
             &band, pair.left, right, nl, &self.grid, params, self.qbest, self.tbest, out,
@@ -391,7 +381,7 @@ impl<'a> Matcher<'a> {
         // The current-epoch buffers hold no stereo results now.
         self.stereo_in_cur = false;
         let px = rig.right.pixel_size_mm[1];
-        let mut median = BinnedMedian::new((tolerance_px + widen_px) as f64);
+        let mut median = BinnedMedian::new(tolerance as f64);
         let mut normal = [0.0; 2];
         for (i, &j) in out[..nl].iter().enumerate() {
             let query = (j != NONE)

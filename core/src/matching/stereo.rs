@@ -95,8 +95,22 @@ impl<'c> RigBand<'c> {
         }
     }
 
+    /// The band over `right` keypoints, their corrected coordinates written into
+    /// `buf` (at least as long as `right`).
+    pub fn over(
+        rig: &Rig,
+        tolerance_px: f32,
+        depth_m: (f64, f64),
+        right: &[Keypoint],
+        buf: &'c mut [[f32; 2]],
+    ) -> Self {
+        let n = right.len().min(buf.len());
+        Self::correct_keypoints(&rig.right, &right[..n], &mut buf[..n]);
+        RigBand::new(rig, tolerance_px, depth_m.0, depth_m.1, &buf[..n])
+    }
+
     /// Fills `out[i]` with the corrected coordinates of each right keypoint.
-    pub fn correct_keypoints(right: &Interior, keypoints: &[Keypoint], out: &mut [[f32; 2]]) {
+    fn correct_keypoints(right: &Interior, keypoints: &[Keypoint], out: &mut [[f32; 2]]) {
         for (o, kp) in out.iter_mut().zip(keypoints) {
             let [x, y] = right.pixel_to_corrected(kp.x as f64, kp.y as f64);
             *o = [x as f32, y as f32];
@@ -124,8 +138,11 @@ impl RigBand<'_> {
     /// unit normal: the right point sits at its line plus `distance * normal`.
     pub fn across(&self, q: &RigQuery, ti: usize) -> Option<(f64, [f64; 2])> {
         let &[x, y] = self.right_corrected.get(ti)?;
-        let d = q.line[0] * x as f64 + q.line[1] * y as f64 + q.line[2];
-        Some((d, [q.line[0], q.line[1]]))
+        let (x, y) = (x as f64, y as f64);
+        Some((
+            q.line[0] * x + q.line[1] * y + q.line[2],
+            [q.line[0], q.line[1]],
+        ))
     }
 }
 
@@ -175,14 +192,13 @@ impl SearchRegion for RigBand<'_> {
 
     #[inline]
     fn contains(&self, q: &RigQuery, ti: usize, _t: &Keypoint) -> bool {
-        let Some(&[x, y]) = self.right_corrected.get(ti) else {
+        let Some((dist, _)) = self.across(q, ti) else {
             return false;
         };
-        let (x, y) = (x as f64, y as f64);
-        let dist = q.line[0] * x + q.line[1] * y + q.line[2];
         if dist.abs() > self.tol_mm {
             return false;
         }
+        let [x, y] = self.right_corrected[ti].map(|v| v as f64);
         // Position along the segment: within [near, far] up to the tolerance.
         let (sx, sy) = (q.far[0] - q.near[0], q.far[1] - q.near[1]);
         let len2 = sx * sx + sy * sy;
@@ -207,7 +223,7 @@ pub struct EpipolarOffset {
 /// A median over a bounded range without storing the values: counts in bins of
 /// `BinnedMedian::STEP` pixels, the median interpolated within its bin.
 pub(crate) struct BinnedMedian {
-    counts: [u16; BinnedMedian::BINS],
+    counts: [u32; BinnedMedian::BINS],
     low: f64,
     n: usize,
 }
@@ -216,7 +232,8 @@ impl BinnedMedian {
     const BINS: usize = 200;
     const STEP: f64 = 0.05;
 
-    /// Values within `+- half_width` pixels (the band: nothing lies outside it).
+    /// Values within `+- half_width` pixels, at most `BINS * STEP / 2` (5 px); those
+    /// beyond count at the ends, which moves no median inside the range.
     pub(crate) fn new(half_width: f64) -> Self {
         let half = half_width.min(Self::BINS as f64 * Self::STEP / 2.0);
         BinnedMedian {
@@ -263,15 +280,17 @@ mod tests {
     fn binned_median_interpolates_within_its_bin() {
         let mut m = BinnedMedian::new(5.0);
         assert_eq!(m.median(), None);
-        for v in [1.52, 1.48, -4.0, 1.51, 9.0, 1.49, 1.5, f64::NAN] {
+        // Four values in the bin [1.50, 1.55), three below it (one beyond the range,
+        // counted at its end), one above, and a non-finite one, not counted. The median
+        // (the 4th of 8) is a quarter into the bin, its values taken as spread evenly.
+        for v in [1.51, 1.51, 1.52, 1.53, -1.0, -2.0, -9.0, 3.0, f64::NAN] {
             m.add(v);
         }
-        // The non-finite value is not counted; those beyond the range count at its ends.
-        assert_eq!(m.count(), 7);
+        assert_eq!(m.count(), 8);
         let median = m.median().unwrap();
-        assert!((median - 1.5).abs() <= BinnedMedian::STEP, "{median}");
-        let mut flat = BinnedMedian::new(2.0);
-        (0..100).for_each(|i| flat.add(-2.0 + 0.04 * i as f64));
-        assert!(flat.median().unwrap().abs() < 0.05);
+        assert!((median - 1.5125).abs() < 1e-9, "{median}");
+        let mut even = BinnedMedian::new(2.0);
+        (0..100).for_each(|i| even.add(-1.98 + 0.04 * i as f64));
+        assert!(even.median().unwrap().abs() < 1e-9);
     }
 }

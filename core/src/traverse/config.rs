@@ -140,6 +140,9 @@ pub const EPIPOLAR_PROBE_WIDEN_PX: f32 = 3.0;
 pub const EPIPOLAR_PROBE_MATCHES: usize = 30;
 /// Smallest offset from the epipolar lines the check corrects, pixels.
 pub const EPIPOLAR_OFFSET_MIN_PX: f64 = 1.0;
+/// The lines' normal must be this close to the image's vertical (the lines within
+/// 25 deg of the rows) for the offset to be corrected on the vertical principal point.
+pub const EPIPOLAR_ROWS_MIN_NORMAL: f64 = 0.9;
 /// Smallest a-posteriori sigma0 the calibration test divides by.
 pub const CALIBRATION_TEST_MIN_SIGMA0: f64 = 0.05;
 

@@ -311,7 +311,7 @@ impl<'a> Traverse<'a> {
     }
 
     /// The rig as the adjustment has it (the calibration when it is not estimated)
-    /// and its standard deviations (zero when fixed).
+    /// and the standard deviations of its last estimate (zero when never estimated).
     pub fn rig_estimate(&self) -> (crate::camera::RelativeOrientation, [f64; 6]) {
         (self.window.rig(), self.window.rig_std())
     }

@@ -188,6 +188,7 @@ impl Traverse<'_> {
         if let Err(e) = result {
             self.last_solve_error = Some(e);
             out.flags |= flags::SOLVE_FAILED;
+            self.hold_estimated_calibration();
             let _ = self
                 .window
                 .set_pose_prior(id, prediction, self.cfg.prediction_sigmas);
@@ -195,10 +196,14 @@ impl Traverse<'_> {
         }
         let Ok(mut rep) = result else { return false };
         // A rejected calibration is corrected and freed: the window is adjusted again,
-        // the calibration with it.
+        // the calibration with it (held again if that fails).
         if self.check_calibration(rep.sigma0) {
             out.flags |= flags::CALIBRATION_CORRECTED;
-            match self.window.solve() {
+            let mut again = self.window.solve();
+            if again.is_err() && self.hold_estimated_calibration() {
+                again = self.window.solve();
+            }
+            match again {
                 Ok(r) => rep = r,
                 Err(e) => {
                     self.last_solve_error = Some(e);

@@ -476,9 +476,10 @@ fn tie_points_with(stated: Rig, epochs: usize) -> (Vec<u32>, u32, Rig) {
 fn a_corrected_calibration_reaches_the_matching() {
     // The stated right principal point is 2 px too low, so every right point lies 2 px
     // off its epipolar line: at the edge of the stereo search's band and of the area
-    // matching's search around a projection. The calibration check corrects it within
-    // the first epochs; the searches must then use the correction. With the stated
-    // calibration in the searches, epochs 6 to 9 kept 28 to 93 tie points.
+    // matching's search around a projection. The calibration check corrects it (at the
+    // first epoch, from the pair's offset from its lines); the searches must then use
+    // the correction. With the stated calibration in the searches, epochs 6 to 9 kept
+    // 28 to 93 tie points.
     let mut stated = rig();
     let px = stated.right.pixel_size_mm[1];
     stated.right.principal_point_mm[1] -= 2.0 * px;
@@ -548,5 +549,45 @@ fn an_offset_from_the_epipolar_lines_is_corrected_before_the_first_matching() {
     assert_eq!(
         kept.right.principal_point_mm,
         slight.right.principal_point_mm
+    );
+}
+
+#[test]
+fn a_calibration_the_test_rejects_is_estimated_until_the_check_ends() {
+    // The stated right focal length 1 % long: no offset across the epipolar lines for
+    // the first measure, a scale the score test sees. Its correction frees the
+    // calibration: estimated in every adjustment until the check's epochs end, then
+    // kept as estimated.
+    let mut stated = rig();
+    stated.right.focal_mm *= 1.01;
+    let cfg = config_for(stated);
+    let check = cfg.calibration_check.unwrap();
+    let (mut st, _) = storage(&cfg);
+    let mut arena = Arena::new(&mut st.0);
+    let mut t = Traverse::new(cfg, &mut arena).unwrap();
+    let mut first = None;
+    for k in 0..check.epochs as usize + 2 {
+        let out = process_view(&mut t, &rig(), &truth(k), k as f64);
+        if out.flags & flags::CALIBRATION_CORRECTED != 0 && first.is_none() {
+            first = Some(k);
+        }
+        let (held, active) = (t.window.calibration_held(), t.window.calibration_active());
+        if (k as u32) < check.epochs - 1 {
+            // Held until the first correction, estimated after it.
+            assert_eq!(held, first.is_none(), "epoch {k}");
+            assert!(active, "epoch {k}");
+        } else if k as u32 >= check.epochs {
+            assert!(!active && !held, "epoch {k}");
+        }
+    }
+    let first = first.expect("the test rejected nothing");
+    assert!((1..10).contains(&first), "first corrected at epoch {first}");
+    assert_eq!(t.calibration_corrections(), 1);
+    // Measured: first corrected at epoch 2, the focal length then 0.007 % off.
+    let error = t.rig_now().right.focal_mm / rig().right.focal_mm - 1.0;
+    assert!(
+        error.abs() < 0.001,
+        "focal length {:.3} % off",
+        100.0 * error
     );
 }

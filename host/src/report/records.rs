@@ -271,8 +271,8 @@ pub struct RunReport {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub smoothing: Option<crate::smoothing::SmoothingSummary>,
     /// The rig as the adjustment had it at the last epoch, when it differs from the
-    /// calibration: estimated (`--estimate-rig`, with standard deviations) or corrected
-    /// by the calibration check (standard deviations zero).
+    /// calibration: estimated (`--estimate-rig`, or by the calibration check after a
+    /// correction: with the standard deviations of its last estimate).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rig: Option<RigReport>,
     /// sigma0 and the chi-square tests over all adjusted epochs.

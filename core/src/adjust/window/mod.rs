@@ -211,8 +211,9 @@ pub struct AdjustConfig {
     pub carried_prior_inflation: f64,
     /// With `estimate_rig` or `self_calibration`: their blocks start held at the
     /// calibration (the poses are adjusted as with a fixed rig) and change only through
-    /// [`Window::correct_calibration`], after [`Window::calibration_test`] found the
-    /// observations call for it.
+    /// [`Window::correct_calibration`], after [`Window::calibration_test`] (or another
+    /// measure) found the observations call for it, or once [`Window::free_calibration`]
+    /// lets every adjustment estimate them.
     pub hold_calibration: bool,
 }
 

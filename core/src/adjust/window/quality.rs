@@ -311,14 +311,22 @@ impl<'a> Window<'a> {
     }
 
     /// Frees a held calibration: from the next solve on, every adjustment estimates it
-    /// within its priors, as [`AdjustConfig::estimate_rig`] does from the start.
+    /// within its priors (the rig's and interior's blocks, as with
+    /// [`AdjustConfig::estimate_rig`]), each slide carrying the leaving epoch's share.
     pub fn free_calibration(&mut self) {
         self.calibration_held = false;
     }
 
+    /// Holds the calibration at its current values again (see
+    /// [`AdjustConfig::hold_calibration`]).
+    pub fn hold_calibration(&mut self) {
+        self.calibration_held = true;
+        self.rig_cov_valid = false;
+    }
+
     /// Takes the rig and interior blocks out of the adjustment for good, keeping their
-    /// values: the calibration was tested long enough and needs no correction, and
-    /// each solve saves their partial derivatives.
+    /// values (held or estimated) and their last standard deviations: the calibration
+    /// was tested long enough, and each solve saves their partial derivatives.
     pub fn drop_calibration(&mut self) {
         self.calibration_active = false;
         self.rig_cov_valid = false;

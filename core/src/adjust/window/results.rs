@@ -148,7 +148,8 @@ impl<'a> Window<'a> {
         self.rig
     }
 
-    /// Standard deviations of the rig parameters (zero when fixed).
+    /// Standard deviations of the rig parameters: of the last estimate, zero when the
+    /// rig was never estimated.
     pub fn rig_std(&self) -> [f64; 6] {
         self.rig_std
     }

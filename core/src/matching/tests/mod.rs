@@ -208,19 +208,21 @@ fn rectified_stereo_on_noisy_scene_is_right() {
     assert!(stats.pass.comparisons as usize <= e.left.kps.len() * cfg.max_candidates);
 }
 
-#[test]
-fn general_rig_with_distortion_and_rotation() {
-    // A converging rig with the test camera's distortion: the epipolar curve is bent in pixels.
+/// A converging rig with the test camera's distortion: its epipolar curves are bent in
+/// pixels.
+fn converging_rig() -> Rig {
     let cam = crate::testkit::test_camera();
-    let rig = Rig {
+    Rig {
         left: cam,
         right: cam,
         relative_angles: [0.01, -0.04, 0.02],
         base_m: [0.5, 0.02, -0.01],
-    };
-    let scene = SyntheticScene::street(11);
-    let e = epoch(&scene, &rig, &pose_at(0.0), 0);
-    let cfg = MatchConfig {
+    }
+}
+
+/// [`config`] with the stereo search of a general `rig` (2 px band, depths from 2 m).
+fn rig_config(rig: Rig) -> MatchConfig {
+    MatchConfig {
         stereo: StereoGeometry::Rig {
             rig,
             tolerance_px: 2.0,
@@ -228,7 +230,15 @@ fn general_rig_with_distortion_and_rotation() {
             max_depth_m: f64::INFINITY,
         },
         ..config()
-    };
+    }
+}
+
+#[test]
+fn general_rig_with_distortion_and_rotation() {
+    let rig = converging_rig();
+    let scene = SyntheticScene::street(11);
+    let e = epoch(&scene, &rig, &pose_at(0.0), 0);
+    let cfg = rig_config(rig);
     let mut store = storage(&cfg);
     let mut arena = Arena::new(&mut store);
     let mut m = Matcher::new(cfg, &mut arena).unwrap();
@@ -277,24 +287,10 @@ fn general_rig_with_distortion_and_rotation() {
 /// geometry, none for a rectified search.
 #[test]
 fn epipolar_offset_measures_a_shifted_right_image() {
-    let cam = crate::testkit::test_camera();
-    let rig = Rig {
-        left: cam,
-        right: cam,
-        relative_angles: [0.01, -0.04, 0.02],
-        base_m: [0.5, 0.02, -0.01],
-    };
+    let rig = converging_rig();
     let scene = SyntheticScene::street(11);
     let mut e = epoch(&scene, &rig, &pose_at(0.0), 0);
-    let cfg = MatchConfig {
-        stereo: StereoGeometry::Rig {
-            rig,
-            tolerance_px: 2.0,
-            min_depth_m: 2.0,
-            max_depth_m: f64::INFINITY,
-        },
-        ..config()
-    };
+    let cfg = rig_config(rig);
     let mut store = storage(&cfg);
     let mut arena = Arena::new(&mut store);
     let mut m = Matcher::new(cfg, &mut arena).unwrap();
@@ -323,6 +319,39 @@ fn epipolar_offset_measures_a_shifted_right_image() {
     let mut rect_arena = Arena::new(&mut rect_store);
     let mut rect = Matcher::new(config(), &mut rect_arena).unwrap();
     assert_eq!(rect.epipolar_offset(e.features(), 3.0, 30), None);
+}
+
+/// Measuring the offset uses the current epoch's buffers as scratch: the epoch matched
+/// after it, and the next one, are the same as without it.
+#[test]
+fn epipolar_offset_leaves_the_matching_as_it_was() {
+    let rig = converging_rig();
+    let scene = SyntheticScene::street(11);
+    let epochs = [0.0, 1.0].map(|y| epoch(&scene, &rig, &pose_at(y), y as u64));
+    let cfg = rig_config(rig);
+    let run = |probe: bool| {
+        let mut store = storage(&cfg);
+        let mut arena = Arena::new(&mut store);
+        let mut m = Matcher::new(cfg, &mut arena).unwrap();
+        let mut seen = Vec::new();
+        for (k, e) in epochs.iter().enumerate() {
+            if probe {
+                assert!(m.epipolar_offset(e.features(), 3.0, 30).is_some());
+            }
+            let prev = (k > 0).then(|| epochs[k - 1].features());
+            let report = m.process_epoch(e.features(), prev, None, None).unwrap();
+            let stereo: Vec<_> = m
+                .stereo_matches(&e.left.kps)
+                .map(|s| (s.left, s.right))
+                .collect();
+            let ties: Vec<_> = m.tie_points().map(|t| (t.track_id, t.cur.left)).collect();
+            seen.push((report.stereo.pass.matches, report.tie_points, stereo, ties));
+        }
+        seen
+    };
+    let (plain, probed) = (run(false), run(true));
+    assert!(plain[1].1 > 100, "{} tie points", plain[1].1);
+    assert_eq!(plain, probed);
 }
 
 #[test]
