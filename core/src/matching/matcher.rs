@@ -13,7 +13,7 @@ use super::motion::{check_motion, QuadObs};
 use super::predict::predict_positions;
 use super::quad::{close_loops, LoopDistances, Quad, QuadStats};
 use super::refine::{refine_checked, Correlator, RefineError};
-use super::search::{match_pass, Best, Features, PairStats, PassParams, SearchRegion};
+use super::search::{match_pass, Best, Features, PairStats, PassParams};
 use super::spread::spread;
 use super::stereo::{BinnedMedian, EpipolarOffset, RectifiedBand, RigBand};
 use super::temporal::GuidedWindow;
@@ -384,10 +384,10 @@ impl<'a> Matcher<'a> {
         let mut median = BinnedMedian::new(tolerance as f64);
         let mut normal = [0.0; 2];
         for (i, &j) in out[..nl].iter().enumerate() {
-            let query = (j != NONE)
-                .then(|| band.prepare(i, &pair.left.keypoints[i]))
+            let across = (j != NONE)
+                .then(|| band.across(&pair.left.keypoints[i], j as usize))
                 .flatten();
-            if let Some((d, nv)) = query.and_then(|(_, q)| band.across(&q, j as usize)) {
+            if let Some((d, nv)) = across {
                 median.add(d / px);
                 normal = [normal[0] + nv[0], normal[1] + nv[1]];
             }

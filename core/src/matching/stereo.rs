@@ -134,29 +134,23 @@ impl<'c> RigBand<'c> {
 }
 
 impl RigBand<'_> {
-    /// Signed distance (mm) of right keypoint `ti` from the line of `q`, and the line's
-    /// unit normal: the right point sits at its line plus `distance * normal`.
-    pub fn across(&self, q: &RigQuery, ti: usize) -> Option<(f64, [f64; 2])> {
-        let &[x, y] = self.right_corrected.get(ti)?;
-        let (x, y) = (x as f64, y as f64);
-        Some((
-            q.line[0] * x + q.line[1] * y + q.line[2],
-            [q.line[0], q.line[1]],
-        ))
+    /// Signed distance (mm) of right keypoint `ti` from the epipolar line of left
+    /// keypoint `left`, and the line's unit normal: the right point sits at its line
+    /// plus `distance * normal`.
+    pub fn across(&self, left: &Keypoint, ti: usize) -> Option<(f64, [f64; 2])> {
+        let (line, _) = self.line_of(left)?;
+        let &p = self.right_corrected.get(ti)?;
+        Some((distance(&line, p), [line[0], line[1]]))
     }
-}
 
-impl SearchRegion for RigBand<'_> {
-    type Query = RigQuery;
-
-    fn prepare(&self, _qi: usize, q: &Keypoint) -> Option<([f32; 4], RigQuery)> {
+    /// The epipolar line of left keypoint `q` in corrected right photo-coordinates
+    /// (unit normal and offset, mm) and the left ray it comes from.
+    fn line_of(&self, q: &Keypoint) -> Option<([f64; 3], Vector3<f64>)> {
         if !(q.x.is_finite() && q.y.is_finite()) {
             return None;
         }
         let [xc, yc] = self.left.pixel_to_corrected(q.x as f64, q.y as f64);
         let d_l = Vector3::new(xc, yc, -self.left.focal_mm);
-        let near = self.at_depth(&d_l, self.min_depth)?;
-        let far = self.at_depth(&d_l, self.max_depth)?;
         let l = self.essential * d_l;
         // Right image point (x, y, -f): a x + b y - f c = 0.
         let norm = libm::sqrt(l[0] * l[0] + l[1] * l[1]);
@@ -164,6 +158,22 @@ impl SearchRegion for RigBand<'_> {
             return None;
         }
         let line = [l[0] / norm, l[1] / norm, -self.right.focal_mm * l[2] / norm];
+        Some((line, d_l))
+    }
+}
+
+/// Signed distance of the point `p` from the unit-normal line `line`.
+fn distance(line: &[f64; 3], [x, y]: [f32; 2]) -> f64 {
+    line[0] * x as f64 + line[1] * y as f64 + line[2]
+}
+
+impl SearchRegion for RigBand<'_> {
+    type Query = RigQuery;
+
+    fn prepare(&self, _qi: usize, q: &Keypoint) -> Option<([f32; 4], RigQuery)> {
+        let (line, d_l) = self.line_of(q)?;
+        let near = self.at_depth(&d_l, self.min_depth)?;
+        let far = self.at_depth(&d_l, self.max_depth)?;
         // Bounding box in pixels of samples along the (straight, corrected) segment.
         let mut rect = [f32::MAX, f32::MAX, f32::MIN, f32::MIN];
         let mut any = false;
@@ -192,13 +202,13 @@ impl SearchRegion for RigBand<'_> {
 
     #[inline]
     fn contains(&self, q: &RigQuery, ti: usize, _t: &Keypoint) -> bool {
-        let Some((dist, _)) = self.across(q, ti) else {
+        let Some(&p) = self.right_corrected.get(ti) else {
             return false;
         };
-        if dist.abs() > self.tol_mm {
+        if distance(&q.line, p).abs() > self.tol_mm {
             return false;
         }
-        let [x, y] = self.right_corrected[ti].map(|v| v as f64);
+        let [x, y] = p.map(|v| v as f64);
         // Position along the segment: within [near, far] up to the tolerance.
         let (sx, sy) = (q.far[0] - q.near[0], q.far[1] - q.near[1]);
         let len2 = sx * sx + sy * sy;

@@ -16,7 +16,7 @@ impl Traverse<'_> {
         let rad = rcfg.search_radius as usize;
         let mut tpl = [0f32; TEMPLATE_LEN];
         let mut buf = Correlator::new();
-        let rig = self.rig_now();
+        let stereo = self.stereo_rig();
         let mut n = 0;
         for tie in self.matcher.tie_points() {
             if n >= self.refined.len() {
@@ -25,7 +25,7 @@ impl Traverse<'_> {
             let Some(entry) = patches.index_of(tie.prev.left) else {
                 continue;
             };
-            let now = stereo_depth(&self.cfg, &rig, tie.cur.left, tie.cur.right);
+            let now = stereo_depth(&self.cfg, &stereo, tie.cur.left, tie.cur.right);
             let scale = anchor_scale(patches.anchor_depth(entry), now);
             if !template_at_scale(patches, entry, scale, &mut tpl) {
                 continue;
@@ -66,7 +66,7 @@ impl Traverse<'_> {
         (left, right): (&ImageView, &ImageView),
         epoch: Option<u32>,
     ) {
-        let rig = self.rig_now();
+        let stereo = self.stereo_rig();
         let Some(patches) = &mut self.patches else {
             return;
         };
@@ -77,7 +77,7 @@ impl Traverse<'_> {
         let limit = self.cfg.max_anchor_scale;
         let (cfg, window) = (&self.cfg, &self.window);
         let carry = |patches: &Patches, entry: usize, at: ([f32; 2], [f32; 2])| {
-            let now = stereo_depth(cfg, &rig, at.0, at.1);
+            let now = stereo_depth(cfg, &stereo, at.0, at.1);
             let s = anchor_scale(patches.anchor_depth(entry), now);
             // A receding point would need a template larger than the anchor's.
             s <= limit && s >= 1.0 - SAME_SCALE
@@ -108,7 +108,7 @@ impl Traverse<'_> {
                 continue;
             }
             let info = tie_info(self.track_points, window, &tie);
-            let depth = stereo_depth(cfg, &rig, tie.cur.left, tie.cur.right);
+            let depth = stereo_depth(cfg, &stereo, tie.cur.left, tie.cur.right);
             patches.push(left, tie.cur.left, info, depth);
         }
         for a in self.area[..self.n_area]
@@ -116,7 +116,7 @@ impl Traverse<'_> {
             .filter(|a| a.point != patches::NO_ID)
         {
             if patches.index_of(a.px.left).is_none() {
-                let depth = stereo_depth(cfg, &rig, a.px.left, a.px.right);
+                let depth = stereo_depth(cfg, &stereo, a.px.left, a.px.right);
                 patches.push(left, a.px.left, a.into(), depth);
             }
         }
@@ -124,7 +124,7 @@ impl Traverse<'_> {
         let kps = self.features[fill][0].keypoints();
         for m in self.matcher.stereo_matches(kps) {
             if !quads.iter().any(|q| q.cur_left == m.left) {
-                let depth = stereo_depth(cfg, &rig, m.left_px, m.right_px);
+                let depth = stereo_depth(cfg, &stereo, m.left_px, m.right_px);
                 let info = PatchInfo::stereo(m.right_px, m.right_sigma);
                 patches.push(left, m.left_px, info, depth);
             }
@@ -143,7 +143,7 @@ impl Traverse<'_> {
     /// search is the dearest correlation of the epoch (a few hundred positions per
     /// keypoint), and a strong image gains nothing from it.
     fn store_line_matches(&mut self, fill: usize, (left, right): (&ImageView, &ImageView)) {
-        let rig = self.rig_now();
+        let stereo = self.stereo_rig();
         let (Some(patches), Some(rcfg)) = (&mut self.patches, self.cfg.matching.refine) else {
             return;
         };
@@ -162,7 +162,7 @@ impl Traverse<'_> {
             if self.matcher.has_stereo_match(i) || sample_template(left, at, h, &mut tpl).is_err() {
                 continue;
             }
-            let Some(line) = epipolar_line(cfg, &rig, at) else {
+            let Some(line) = epipolar_line(cfg, &stereo, at) else {
                 continue;
             };
             let Ok(guess) = search_line(&tpl, h, right, line, accept) else {
@@ -171,7 +171,7 @@ impl Traverse<'_> {
             let Ok(r) = refine_checked(&mut buf, left, right, at, guess, &rcfg) else {
                 continue;
             };
-            let depth = stereo_depth(cfg, &rig, at, r.at);
+            let depth = stereo_depth(cfg, &stereo, at, r.at);
             let info = PatchInfo::stereo(r.at, r.sigma);
             live += usize::from(patches.push(left, at, info, depth));
         }
@@ -195,7 +195,7 @@ const LINE_FAR_M: f64 = 1.0e4;
 /// the disparity range on a rectified pair; on a general rig the line from the point's
 /// projection at the stereo search's nearest depth to its vanishing point, through
 /// `rig`, the rig as last adjusted.
-fn epipolar_line(cfg: &TraverseConfig, rig: &Rig, at: [f32; 2]) -> Option<LineSegment> {
+fn epipolar_line(cfg: &TraverseConfig, stereo: &StereoRig, at: [f32; 2]) -> Option<LineSegment> {
     let (near_m, far_m) = match cfg.matching.stereo {
         StereoGeometry::Rectified {
             min_disparity_px,
@@ -211,11 +211,12 @@ fn epipolar_line(cfg: &TraverseConfig, rig: &Rig, at: [f32; 2]) -> Option<LineSe
             ..
         } => (min_depth_m.max(LINE_NEAR_M), max_depth_m.min(LINE_FAR_M)),
     };
+    let rig = &stereo.rig;
     let [x, y] = rig.left.pixel_to_corrected(at[0] as f64, at[1] as f64);
-    let right = camera_pose(&Pose::default(), &rig.relative(), Camera::Right);
     let seen_at = |depth: f64| {
         let s = depth / rig.left.focal_mm;
-        let p = project_to_pixel(&right, &rig.right, &[x * s, y * s, -depth]).ok()?;
+        let p =
+            project_to_pixel(&stereo.right_at_origin, &rig.right, &[x * s, y * s, -depth]).ok()?;
         Some([p[0] as f32, p[1] as f32])
     };
     LineSegment::between(seen_at(near_m)?, seen_at(far_m)?)
@@ -247,13 +248,39 @@ pub(super) fn same_spot(a: [f32; 2], b: [f32; 2]) -> bool {
     (a[0] - b[0]).abs() < SAME_SPOT_PX && (a[1] - b[1]).abs() < SAME_SPOT_PX
 }
 
+/// The rig as last adjusted ([`Traverse::rig_now`]) with the right camera's poses the
+/// depths and lines of a loop are taken from, worked out once for the loop.
+struct StereoRig {
+    rig: Rig,
+    /// The pair with its left camera at the datum (depths).
+    at_datum: [Pose; 2],
+    /// The right camera with the left one at the origin (epipolar lines).
+    right_at_origin: Pose,
+}
+
+impl Traverse<'_> {
+    fn stereo_rig(&self) -> StereoRig {
+        let rig = self.rig_now();
+        let relative = rig.relative();
+        let d = self.cfg.datum;
+        StereoRig {
+            at_datum: [d, camera_pose(&d, &relative, Camera::Right)],
+            right_at_origin: camera_pose(&Pose::default(), &relative, Camera::Right),
+            rig,
+        }
+    }
+}
+
 /// Depth (metres, along the left camera's axis) of a stereo observation, through
-/// `rig`, the rig as last adjusted; `None` when the rays barely intersect (a far point).
-fn stereo_depth(cfg: &TraverseConfig, rig: &Rig, left: [f32; 2], right: [f32; 2]) -> Option<f32> {
-    let d = cfg.datum;
-    let poses = [d, camera_pose(&d, &rig.relative(), Camera::Right)];
-    let x = intersect_pair(cfg, rig, &poses, left, right)?;
-    Some(-d.to_camera(&x)[2] as f32)
+/// the rig as last adjusted; `None` when the rays barely intersect (a far point).
+fn stereo_depth(
+    cfg: &TraverseConfig,
+    stereo: &StereoRig,
+    left: [f32; 2],
+    right: [f32; 2],
+) -> Option<f32> {
+    let x = intersect_pair(cfg, &stereo.rig, &stereo.at_datum, left, right)?;
+    Some(-stereo.at_datum[0].to_camera(&x)[2] as f32)
 }
 
 /// How many times larger a point appears now than at its template's anchor epoch,
