@@ -245,6 +245,18 @@ impl<'a> Matcher<'a> {
         }
     }
 
+    /// The stereo search's side of a pair: the left keypoints searched (`nl`), the
+    /// right ones (within the capacity) indexed in the grid, and how many keypoints of
+    /// the pair are left out (beyond the capacity, or not placeable in the grid).
+    fn index_pair<'p>(&mut self, pair: &StereoFeatures<'p>) -> (usize, Features<'p>, u32) {
+        let n = self.cfg.max_keypoints;
+        let (nl, nr) = (pair.left.usable(n), pair.right.usable(n));
+        let right = Features::new(&pair.right.keypoints[..nr], &pair.right.descriptors[..nr]);
+        let beyond = pair.left.keypoints.len() - nl + pair.right.keypoints.len() - nr;
+        let unplaced = self.grid.build(right.keypoints);
+        (nl, right, (beyond + unplaced) as u32)
+    }
+
     /// Stereo matching of one pair into the `cur` buffers.
     fn stereo_into_cur(
         &mut self,
@@ -252,14 +264,12 @@ impl<'a> Matcher<'a> {
         images: Option<(ImageView<'_>, ImageView<'_>)>,
     ) -> StereoStats {
         let n = self.cfg.max_keypoints;
-        let (nl, nr) = (pair.left.usable(n), pair.right.usable(n));
-        let right = Features::new(&pair.right.keypoints[..nr], &pair.right.descriptors[..nr]);
+        let (nl, right, ignored_keypoints) = self.index_pair(&pair);
+        let nr = right.keypoints.len();
         let mut stats = StereoStats {
-            ignored_keypoints: (pair.left.keypoints.len() - nl + pair.right.keypoints.len() - nr)
-                as u32,
+            ignored_keypoints,
             ..Default::default()
         };
-        stats.ignored_keypoints += self.grid.build(right.keypoints) as u32;
         let params = self.params();
         self.stereo_in_cur = true;
         let cur = &mut self.cur;
@@ -366,10 +376,7 @@ impl<'a> Matcher<'a> {
         else {
             return None;
         };
-        let n = self.cfg.max_keypoints;
-        let (nl, nr) = (pair.left.usable(n), pair.right.usable(n));
-        let right = Features::new(&pair.right.keypoints[..nr], &pair.right.descriptors[..nr]);
-        self.grid.build(right.keypoints);
+        let (nl, right, _) = self.index_pair(&pair);
         let depth = (min_depth_m, max_depth_m);
         let tolerance = tolerance_px + widen_px;
         let params = self.params();
