@@ -52,9 +52,10 @@ impl Traverse<'_> {
 
     /// The score test after an adjustment whose a-posteriori sigma is `sigma0`:
     /// corrects the held calibration when the test rejects it at `persistence`
-    /// consecutive epochs and the correction matters (returns true: the window must be
-    /// adjusted again). After `epochs` epochs the calibration, held or estimated, is
-    /// kept as it is and leaves the adjustment.
+    /// consecutive epochs and the correction matters, or at `sustained` consecutive
+    /// epochs whatever the correction's size (returns true: the window must be adjusted
+    /// again). After `epochs` epochs the calibration, held or estimated, is kept as it
+    /// is and leaves the adjustment.
     pub(super) fn check_calibration(&mut self, sigma0: f64) -> bool {
         let Some(check) = self.cfg.calibration_check else {
             return false;
@@ -71,15 +72,21 @@ impl Traverse<'_> {
             if let Ok(test) = self.window.calibration_test(sigma0) {
                 let critical = chi2_quantile(1.0 - check.level, test.dof as f64);
                 let px = self.cfg.rig.right.pixel_size_mm[0];
-                let rejected = test.statistic > critical
-                    && self.window.correction_effect(&test) > check.min_effect_px * px;
-                self.calibration_rejections = if rejected {
-                    self.calibration_rejections + 1
-                } else {
-                    0
-                };
-                if self.calibration_rejections >= check.persistence {
+                let significant = test.statistic > critical;
+                let matters =
+                    significant && self.window.correction_effect(&test) > check.min_effect_px * px;
+                let count = |run: u32, now: bool| if now { run + 1 } else { 0 };
+                self.calibration_rejections = count(self.calibration_rejections, matters);
+                self.calibration_significant = count(self.calibration_significant, significant);
+                // A disparity offset of a tenth of a pixel moves the newest epoch's
+                // observations by less than the effect asked of a correction, but the
+                // scale of every step by half a per cent; rejected epoch after epoch, it
+                // is wrong, however small its step.
+                if self.calibration_rejections >= check.persistence
+                    || self.calibration_significant >= check.sustained
+                {
                     self.calibration_rejections = 0;
+                    self.calibration_significant = 0;
                     self.correct_calibration(&test);
                     return true;
                 }

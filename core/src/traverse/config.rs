@@ -123,6 +123,9 @@ pub struct CalibrationCheck {
     /// Consecutive epochs that must reject the calibration before it is corrected: a
     /// wrong calibration is rejected at every epoch, a right one only now and then.
     pub persistence: u32,
+    /// Consecutive rejections after which the calibration is corrected even though the
+    /// correction moves the newest epoch's observations by less than `min_effect_px`.
+    pub sustained: u32,
 }
 
 /// Epochs over which the calibration is tested ([`CalibrationCheck::epochs`]).
@@ -133,6 +136,10 @@ pub const CALIBRATION_CHECK_LEVEL: f64 = 1e-3;
 pub const CALIBRATION_MIN_EFFECT_PX: f64 = 0.1;
 /// Consecutive rejections before a correction ([`CalibrationCheck::persistence`]).
 pub const CALIBRATION_PERSISTENCE: u32 = 2;
+/// Consecutive rejections before a correction of any size
+/// ([`CalibrationCheck::sustained`]): twice the longest run of rejections of a perfect
+/// calibration on the benchmark's rendered streets (4, `seed2014`; 31 runs).
+pub const CALIBRATION_SUSTAINED_REJECTIONS: u32 = 8;
 /// How much wider than the stereo band the band is in which the calibration check
 /// measures the pairs' offset from their epipolar lines, pixels.
 pub const EPIPOLAR_PROBE_WIDEN_PX: f32 = 3.0;
@@ -153,6 +160,7 @@ impl Default for CalibrationCheck {
             level: CALIBRATION_CHECK_LEVEL,
             min_effect_px: CALIBRATION_MIN_EFFECT_PX,
             persistence: CALIBRATION_PERSISTENCE,
+            sustained: CALIBRATION_SUSTAINED_REJECTIONS,
         }
     }
 }

@@ -206,8 +206,12 @@ pub struct Traverse<'a> {
     last_solve_error: Option<AdjustError>,
     /// Corrections the calibration check applied so far.
     calibration_corrections: u32,
-    /// Consecutive epochs whose calibration test rejected the calibration.
+    /// Consecutive epochs whose calibration test rejected the calibration with a
+    /// correction that matters (`CalibrationCheck::min_effect_px`).
     calibration_rejections: u32,
+    /// Consecutive epochs the score test rejected the calibration, whatever the
+    /// correction's effect.
+    calibration_significant: u32,
     /// The stereo pairs' offset from their epipolar lines has been measured
     /// (`Traverse::check_epipolar_offset`).
     epipolar_offset_checked: bool,
@@ -268,6 +272,7 @@ impl<'a> Traverse<'a> {
             last_solve_error: None,
             calibration_corrections: 0,
             calibration_rejections: 0,
+            calibration_significant: 0,
             epipolar_offset_checked: false,
             odometer_count: None,
         })
