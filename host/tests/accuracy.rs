@@ -87,17 +87,13 @@ const MAX_MISCALIBRATED_DRIFT_PCT: f64 = 1.2;
 fn a_miscalibrated_rig_is_corrected_by_default() {
     let t = tempfile::tempdir().unwrap();
     let ds = t.path().join("ds");
-    let s = |p: &Path| p.to_str().unwrap().to_owned();
     let scene = ["--scene", "curves", "--frames", "40"];
     synthesize(
         &ds,
         &[&scene[..], &["--calib-error", CALIBRATION_ERROR]].concat(),
     );
-    let (drift, rot, corrected) = run_and_evaluate(&ds, &t.path().join("default"), &[]);
-    let held = t.path().join("held.toml");
-    std::fs::write(&held, "check_calibration = false\n").unwrap();
-    let (held_drift, held_rot, held_corrected) =
-        run_and_evaluate(&ds, &t.path().join("held"), &["--config", &s(&held)]);
+    let ((drift, rot, corrected), (held_drift, held_rot, held_corrected)) =
+        default_and_held(&ds, t.path());
     assert!(corrected >= 1 && held_corrected == 0);
     assert!(
         drift <= MAX_MISCALIBRATED_DRIFT_PCT && drift < 0.5 * held_drift && rot < held_rot,
@@ -119,31 +115,43 @@ fn a_calibration_rejected_epoch_after_epoch_is_corrected_however_small_the_step(
     // three epochs, does not find the offset either (`docs/traverse.md`).
     let t = tempfile::tempdir().unwrap();
     let ds = t.path().join("ds");
-    let s = |p: &Path| p.to_str().unwrap().to_owned();
     synthesize(&ds, &["--scene", "curves", "--frames", "40"]);
-    let calib = ds.join("calib.txt");
-    let text = std::fs::read_to_string(&calib).unwrap();
-    let shifted: Vec<String> = text
-        .lines()
-        .map(|line| {
-            let mut f: Vec<String> = line.split_whitespace().map(str::to_owned).collect();
-            if f.first().map(String::as_str) == Some("P1:") {
-                // P1 = [f 0 cx -f*b; 0 f cy 0; 0 0 1 0]: cx is the fourth field.
-                let cx: f64 = f[3].parse().unwrap();
-                f[3] = format!("{}", cx - DISPARITY_OFFSET_PX);
-            }
-            f.join(" ")
-        })
-        .collect();
-    std::fs::write(&calib, shifted.join("\n") + "\n").unwrap();
-    let (drift, _, corrected) = run_and_evaluate(&ds, &t.path().join("default"), &[]);
-    let held = t.path().join("held.toml");
-    std::fs::write(&held, "check_calibration = false\n").unwrap();
-    let (held_drift, _, _) =
-        run_and_evaluate(&ds, &t.path().join("held"), &["--config", &s(&held)]);
+    move_right_principal_point(&ds.join("calib.txt"), -DISPARITY_OFFSET_PX);
+    let ((drift, _, corrected), (held_drift, _, _)) = default_and_held(&ds, t.path());
     assert!(corrected >= 1, "the calibration was never corrected");
     assert!(
         drift < held_drift,
         "default {drift:.3} %; calibration held as given {held_drift:.3} %"
     );
+}
+
+/// Runs `ds` with the default configuration and with the calibration held as given
+/// (`check_calibration = false`), outputs under `dir`: [`run_and_evaluate`] of each.
+fn default_and_held(ds: &Path, dir: &Path) -> ((f64, f64, usize), (f64, f64, usize)) {
+    let default = run_and_evaluate(ds, &dir.join("default"), &[]);
+    let held = dir.join("held.toml");
+    std::fs::write(&held, "check_calibration = false\n").unwrap();
+    let config = held.to_str().unwrap();
+    (
+        default,
+        run_and_evaluate(ds, &dir.join("held"), &["--config", config]),
+    )
+}
+
+/// Moves the right camera's principal point by `dx_px` along the rows in a KITTI
+/// `calib.txt` (`P1 = [f 0 cx -f*b; 0 f cy 0; 0 0 1 0]`: cx is its fourth field).
+fn move_right_principal_point(calib: &Path, dx_px: f64) {
+    let text = std::fs::read_to_string(calib).unwrap();
+    let moved: Vec<String> = text
+        .lines()
+        .map(|line| {
+            let mut f: Vec<String> = line.split_whitespace().map(str::to_owned).collect();
+            if f.first().map(String::as_str) == Some("P1:") {
+                let cx: f64 = f[3].parse().unwrap();
+                f[3] = format!("{}", cx + dx_px);
+            }
+            f.join(" ")
+        })
+        .collect();
+    std::fs::write(calib, moved.join("\n") + "\n").unwrap();
 }
