@@ -6,6 +6,7 @@
 //! `FLOOR_DRIFT_PCT` and `FLOOR_DEG_PER_M`.
 mod common;
 use common::ok;
+use phototraverse_host::dataset::kitti;
 use std::path::Path;
 
 /// Epochs of the sequence: long enough for segments of tens of metres.
@@ -138,20 +139,15 @@ fn default_and_held(ds: &Path, dir: &Path) -> ((f64, f64, usize), (f64, f64, usi
     )
 }
 
-/// Moves the right camera's principal point by `dx_px` along the rows in a KITTI
-/// `calib.txt` (`P1 = [f 0 cx -f*b; 0 f cy 0; 0 0 1 0]`: cx is its fourth field).
+/// Moves the right camera's principal point by `dx_px` along the rows in the KITTI
+/// `calib.txt` of a 640x480 `synth` sequence, read and written by the dataset's own
+/// reader and writer.
 fn move_right_principal_point(calib: &Path, dx_px: f64) {
     let text = std::fs::read_to_string(calib).unwrap();
-    let moved: Vec<String> = text
-        .lines()
-        .map(|line| {
-            let mut f: Vec<String> = line.split_whitespace().map(str::to_owned).collect();
-            if f.first().map(String::as_str) == Some("P1:") {
-                let cx: f64 = f[3].parse().unwrap();
-                f[3] = format!("{}", cx + dx_px);
-            }
-            f.join(" ")
-        })
-        .collect();
-    std::fs::write(calib, moved.join("\n") + "\n").unwrap();
+    let [Some(p0), Some(p1), ..] = kitti::parse_calib(&text, calib).unwrap() else {
+        panic!("{} has no P0 and P1", calib.display());
+    };
+    let mut rig = kitti::rig_from_calib(&p0, &p1, 640, 480, calib).unwrap();
+    rig.right.principal_point_mm[0] += dx_px * rig.right.pixel_size_mm[0];
+    std::fs::write(calib, kitti::calib_text(&rig)).unwrap();
 }
