@@ -6,7 +6,7 @@
 //! `FLOOR_DRIFT_PCT` and `FLOOR_DEG_PER_M`.
 mod common;
 use common::ok;
-use phototraverse_host::dataset::kitti;
+use phototraverse_host::dataset::{kitti, Dataset};
 use std::path::Path;
 
 /// Epochs of the sequence: long enough for segments of tens of metres.
@@ -117,7 +117,7 @@ fn a_calibration_rejected_epoch_after_epoch_is_corrected_however_small_the_step(
     let t = tempfile::tempdir().unwrap();
     let ds = t.path().join("ds");
     synthesize(&ds, &["--scene", "curves", "--frames", "40"]);
-    move_right_principal_point(&ds.join("calib.txt"), -DISPARITY_OFFSET_PX);
+    move_right_principal_point(&ds, -DISPARITY_OFFSET_PX);
     let ((drift, _, corrected), (held_drift, _, _)) = default_and_held(&ds, t.path());
     assert!(corrected >= 1, "the calibration was never corrected");
     assert!(
@@ -140,14 +140,10 @@ fn default_and_held(ds: &Path, dir: &Path) -> ((f64, f64, usize), (f64, f64, usi
 }
 
 /// Moves the right camera's principal point by `dx_px` along the rows in the KITTI
-/// `calib.txt` of a 640x480 `synth` sequence, read and written by the dataset's own
-/// reader and writer.
-fn move_right_principal_point(calib: &Path, dx_px: f64) {
-    let text = std::fs::read_to_string(calib).unwrap();
-    let [Some(p0), Some(p1), ..] = kitti::parse_calib(&text, calib).unwrap() else {
-        panic!("{} has no P0 and P1", calib.display());
-    };
-    let mut rig = kitti::rig_from_calib(&p0, &p1, 640, 480, calib).unwrap();
+/// `calib.txt` of the sequence in `ds`: the rig as the dataset reader builds it (size
+/// from the images), written back by the dataset's own writer.
+fn move_right_principal_point(ds: &Path, dx_px: f64) {
+    let mut rig = Dataset::open(ds).unwrap().rig;
     rig.right.principal_point_mm[0] += dx_px * rig.right.pixel_size_mm[0];
-    std::fs::write(calib, kitti::calib_text(&rig)).unwrap();
+    std::fs::write(ds.join("calib.txt"), kitti::calib_text(&rig)).unwrap();
 }
