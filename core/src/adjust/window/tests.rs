@@ -198,39 +198,48 @@ fn schur_step_zeroes_the_numerical_gradient() {
     for p in 0..w.n_point_slots {
         w.points[p].xyz[1] += 5e-3;
     }
-    let grad_norm = |w: &mut Window| -> f64 {
-        let mut sum = 0.0;
-        let h = 1e-7;
-        let n_cam = w.n_cam();
-        for i in 0..n_cam + 3 * w.n_point_slots {
-            let bump = |w: &mut Window, d: f64| {
-                if i < 6 * w.n_epochs {
-                    w.epochs[i / 6].params[i % 6] += d;
-                } else if i < 6 * w.n_epochs + 6 {
-                    let mut r = w.rig.to_array();
-                    r[i - 6 * w.n_epochs] += d;
-                    w.rig = RelativeOrientation::from_array(&r);
-                } else if i < n_cam {
-                    w.interior[i - 6 * w.n_epochs - 6] += d;
-                } else {
-                    let k = i - n_cam;
-                    w.points[k / 3].xyz[k % 3] += d;
-                }
-            };
-            bump(w, h);
-            let cp = w.cost().0;
-            bump(w, -2.0 * h);
-            let cm = w.cost().0;
-            bump(w, h);
-            let g = (cp - cm) / (2.0 * h);
-            sum += g * g;
+    let n_cam = w.n_cam();
+    let n = n_cam + 3 * w.n_point_slots;
+    let bump = |w: &mut Window, i: usize, d: f64| {
+        if i < 6 * w.n_epochs {
+            w.epochs[i / 6].params[i % 6] += d;
+        } else if i < 6 * w.n_epochs + 6 {
+            let mut r = w.rig.to_array();
+            r[i - 6 * w.n_epochs] += d;
+            w.rig = RelativeOrientation::from_array(&r);
+        } else if i < n_cam {
+            w.interior[i - 6 * w.n_epochs - 6] += d;
+        } else {
+            let k = i - n_cam;
+            w.points[k / 3].xyz[k % 3] += d;
         }
-        libm::sqrt(sum)
     };
+    let grad_norm = |w: &mut Window| numerical_gradient_norm(w, n, &bump);
     let before = grad_norm(&mut w);
     w.step(0.0).unwrap();
     let after = grad_norm(&mut w);
     assert!(after < 1e-3 * before, "gradient {before} -> {after}");
+}
+
+/// Norm of the numerical gradient of `vTPv` (central differences) over `n` parameters,
+/// `bump(w, i, d)` moving parameter `i` by `d`.
+fn numerical_gradient_norm(
+    w: &mut Window,
+    n: usize,
+    bump: impl Fn(&mut Window, usize, f64),
+) -> f64 {
+    let h = 1e-7;
+    let mut sum = 0.0;
+    for i in 0..n {
+        bump(w, i, h);
+        let cp = w.cost().0;
+        bump(w, i, -2.0 * h);
+        let cm = w.cost().0;
+        bump(w, i, h);
+        let g = (cp - cm) / (2.0 * h);
+        sum += g * g;
+    }
+    libm::sqrt(sum)
 }
 
 /// The GNSS residual's attitude derivatives (the lever arm turning with the camera)
