@@ -214,7 +214,7 @@ fn schur_step_zeroes_the_numerical_gradient() {
             w.points[k / 3].xyz[k % 3] += d;
         }
     };
-    let grad_norm = |w: &mut Window| numerical_gradient_norm(w, n, &bump);
+    let grad_norm = |w: &mut Window| numerical_gradient_norm(w, n, bump);
     let before = grad_norm(&mut w);
     w.step(0.0).unwrap();
     let after = grad_norm(&mut w);
