@@ -2,15 +2,16 @@
 """An outage bridged by a pose graph over the images' relative poses, for comparison with
 the smoothing `run` does (`host/src/smoothing.rs`).
 
-The graph: the poses of every epoch (attitude and left perspective centre) are the unknowns.
-Each step observes the relative pose of two consecutive epochs as an images-only run
-(`run --images-only`) estimated it (`--chain aided`: as the aided run's firmware did): the relative rotation, with `--sigma-rot` radians per
-axis, and the step in the earlier camera's frame, with `--sigma-step` metres per axis. Each
-fix of the aided run observes its epoch's centre with its sigma; the datum epoch is held.
-Gauss-Newton on the rotations' tangent space (numerical Jacobians per step, a sparse
-solve). It knows the turn geometry and where the fixes see the attitude, which the
-smoothing's per-coordinate chain does not; it does not know the images' systematic errors,
-which the on-board window meets with the fixes.
+The graph: the poses of every epoch (attitude and left perspective centre) are the
+unknowns. Each step observes the relative pose of two consecutive epochs as an images-only
+run (`run --images-only`) estimated it (`--chain aided`: as the aided run's firmware did):
+the relative rotation, with `--sigma-rot` radians per axis, and the step in the earlier
+camera's frame, with `--sigma-step` metres per axis. Each fix of the aided run observes its
+epoch's left centre with its sigma (no lever arm: `synth` puts the antenna there); the
+datum epoch is held. Gauss-Newton on the rotations' tangent space (numerical Jacobians per
+step, a sparse solve). It knows the turn geometry and where the fixes see the attitude,
+which the smoothing's per-coordinate chain does not; it does not know the images'
+systematic errors, which the on-board window meets with the fixes.
 
 Prints the bars as `outage.py` does: the largest position error inside the outage and the
 RMS error outside, against the truth.
