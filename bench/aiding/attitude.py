@@ -149,27 +149,27 @@ def parse_stretches(text):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="+", help="`phototraverse run` output directories")
-    ap.add_argument("--every", type=int, default=20, help="the error every N epochs (default)")
-    ap.add_argument("--turns", action="store_true", help="the error's change over each turn")
-    ap.add_argument("--stretches", default="", metavar="A..B,...",
-                    help="the mean error of the steps' direction in the camera frame")
-    ap.add_argument("--rotations", default="", metavar="A..B,...",
-                    help="the summed error of the steps' rotations in the camera frame")
+    view = ap.add_mutually_exclusive_group()
+    view.add_argument("--every", type=int, default=20, help="the error every N epochs (default)")
+    view.add_argument("--turns", action="store_true", help="the error's change over each turn")
+    view.add_argument("--stretches", default="", metavar="A..B,...",
+                      help="the mean error of the steps' direction in the camera frame")
+    view.add_argument("--rotations", default="", metavar="A..B,...",
+                      help="the summed error of the steps' rotations in the camera frame")
     ap.add_argument("--truth", help="gt_poses.txt, for a run without a report.json (the peer's)")
     args = ap.parse_args()
     stretches = parse_stretches(args.stretches)
     rotations = parse_stretches(args.rotations)
     for run in args.runs:
         truth, est = load(run, args.truth)
-        err = errors(truth, est)
-        if args.turns:
-            show_turns(run, truth, err)
-        elif stretches:
+        if stretches:
             show_stretches(run, truth, est, stretches)
         elif rotations:
             show_rotations(run, truth, est, rotations)
+        elif args.turns:
+            show_turns(run, truth, errors(truth, est))
         else:
-            show_every(run, truth, err, args.every)
+            show_every(run, truth, errors(truth, est), args.every)
 
 
 if __name__ == "__main__":
