@@ -24,9 +24,11 @@ usage: track_drift.py RUN_DIR DATASET_DIR FIRST LAST        (numpy; KITTI layout
 """
 import argparse
 import os
+import sys
 
 import numpy as np
 
+from peer_vo import DatasetError
 from precision import Depths, read_model, rig
 from steps import read_poses
 
@@ -90,7 +92,14 @@ def main():
     ap.add_argument("first", type=int)
     ap.add_argument("last", type=int, help="exclusive")
     args = ap.parse_args()
-    f, cx, cy, _ = rig(args.dataset)
+    if not os.path.isdir(os.path.join(args.dataset, "depth_0")):
+        sys.exit(f"{args.dataset}: no depth_0/ (render it with `synth --depth`)")
+    if not os.path.isfile(os.path.join(args.run, "colmap", "images.txt")):
+        sys.exit(f"{args.run}: no colmap/images.txt (a `phototraverse run` output directory)")
+    try:
+        f, cx, cy, _ = rig(args.dataset)
+    except DatasetError as e:
+        sys.exit(str(e))
     cam = (f, cx, cy)
     poses = read_poses(os.path.join(args.dataset, "gt_poses.txt"))
     images = read_model(args.run)
