@@ -48,6 +48,23 @@ def rig(dataset):
     return f, p0[0, 2], p0[1, 2], -p1[0, 3] / f
 
 
+def to_world(pose, u, v, z, f, cx, cy):
+    """The object point behind pixel (u, v) at depth z of a camera (KITTI frame, camera to
+    world pose); u, v, z may be arrays of any one shape (the point on a last axis of 3)."""
+    x = np.stack([(u - cx) / f * z, (v - cy) / f * z, z], -1)
+    return x @ pose[:3, :3].T + pose[:3, 3]
+
+
+def image_motion(x, y, z, f):
+    """Pixel motion (du, dv) of a point at normalised (x, y) and depth z when its camera
+    turns by a small rotation about x, y, z and moves along x, y, z (KITTI frame): two
+    arrays with those six columns on a last axis."""
+    zero = np.zeros_like(x * z)
+    du = np.stack([f * x * y, -f * (1 + x * x), f * y, -f / z + zero, zero, f * x / z], -1)
+    dv = np.stack([f * (1 + y * y), -f * x * y, -f * x, zero, -f / z + zero, f * y / z], -1)
+    return du, dv
+
+
 class Depths:
     """Left depth maps, read once each; the depth at a sub-pixel position."""
 
@@ -124,8 +141,8 @@ def main():
             if z0 is None:
                 continue
             u0, v0 = before
-            xyz = poses[k - 1] @ np.array([(u0 - cx) / f * z0, (v0 - cy) / f * z0, z0, 1.0])
-            cam = np.linalg.inv(poses[k]) @ xyz
+            xyz = to_world(poses[k - 1], u0, v0, z0, f, cx, cy)
+            cam = np.linalg.inv(poses[k]) @ np.append(xyz, 1.0)
             temporal_x.append(u - (f * cam[0] / cam[2] + cx))
             temporal_y.append(v - (f * cam[1] / cam[2] + cy))
     print(summary("stereo (disparity)", stereo))

@@ -31,7 +31,7 @@ import sys
 import cv2
 import numpy as np
 
-from peer_vo import read_calib
+from precision import image_motion, rig, to_world
 from steps import read_poses
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "sift"))
@@ -45,18 +45,11 @@ MARGIN = 5
 MIN_GRADIENT = 2.0
 
 
-def camera(dataset):
-    p0, _ = read_calib(os.path.join(dataset, "calib.txt"))
-    return p0[0, 0], p0[0, 2], p0[1, 2]
-
-
-def image(dataset, k):
+def frame(dataset, k):
+    """Epoch k's left image and depth map."""
     path = os.path.join(dataset, "image_0", f"{k:06d}.png")
-    return cv2.imread(path, cv2.IMREAD_GRAYSCALE).astype(np.float32)
-
-
-def depth(dataset, k):
-    return read_pfm(os.path.join(dataset, "depth_0", f"{k:06d}.pfm"))
+    image = cv2.imread(path, cv2.IMREAD_GRAYSCALE).astype(np.float32)
+    return image, read_pfm(os.path.join(dataset, "depth_0", f"{k:06d}.pfm"))
 
 
 def carry(pose_a, pose_b, z, f, cx, cy):
@@ -65,18 +58,18 @@ def carry(pose_a, pose_b, z, f, cx, cy):
     h, w = z.shape
     c, r = np.meshgrid(np.arange(w), np.arange(h))
     with np.errstate(invalid="ignore"):
-        xa = np.stack([(c - cx) / f * z, (r - cy) / f * z, z], -1)
-        world = xa @ pose_a[:3, :3].T + pose_a[:3, 3]
+        world = to_world(pose_a, c, r, z, f, cx, cy)
         xb = (world - pose_b[:3, 3]) @ pose_b[:3, :3]
         u = f * xb[..., 0] / xb[..., 2] + cx
         v = f * xb[..., 1] / xb[..., 2] + cy
     return u, v, xb[..., 2]
 
 
-def step_rotation(dataset, poses, k, f, cx, cy):
+def step_rotation(before, after, poses, k, f, cx, cy):
     """The error (mrad, about x, y, z) of the poses' rotation from camera k-1 to k: minus the
-    rotation of camera k that aligns image k onto image k-1."""
-    za, zb = depth(dataset, k - 1), depth(dataset, k)
+    rotation of camera k that aligns image k onto image k-1 (`before` and `after`: their
+    frames)."""
+    (ia, za), (ib, zb) = before, after
     u, v, zc = carry(poses[k - 1], poses[k], za, f, cx, cy)
     h, w = za.shape
     ok = np.isfinite(zc) & (zc > 0.5) & (u > 2) & (u < w - 3) & (v > 2) & (v < h - 3)
@@ -84,16 +77,14 @@ def step_rotation(dataset, poses, k, f, cx, cy):
     seen = cv2.remap(zb.astype(np.float32), um, vm, cv2.INTER_NEAREST)
     ok &= np.abs(seen - zc) < OCCLUSION * zc
     ok = cv2.erode(ok.astype(np.uint8), np.ones((MARGIN, MARGIN), np.uint8)).astype(bool)
-    warped = cv2.remap(image(dataset, k), um, vm, cv2.INTER_CUBIC).astype(np.float64)
+    warped = cv2.remap(ib, um, vm, cv2.INTER_CUBIC).astype(np.float64)
     gx = cv2.Sobel(warped, cv2.CV_64F, 1, 0, ksize=3) / 8
     gy = cv2.Sobel(warped, cv2.CV_64F, 0, 1, ksize=3) / 8
     ok &= np.hypot(gx, gy) > MIN_GRADIENT
-    x, y = (u - cx) / f, (v - cy) / f
-    # Image motion of a small rotation of camera k about its x, y and z axes.
-    du = np.stack([f * x * y, -f * (1 + x * x), f * y], -1)
-    dv = np.stack([f * (1 + y * y), -f * x * y, -f * x], -1)
-    jac = (gx[..., None] * du + gy[..., None] * dv)[ok]
-    diff = (image(dataset, k - 1).astype(np.float64) - warped)[ok]
+    du, dv = image_motion((u - cx) / f, (v - cy) / f, zc, f)
+    # Only the rotation: the true depths carry the translation.
+    jac = (gx[..., None] * du[..., :3] + gy[..., None] * dv[..., :3])[ok]
+    diff = (ia.astype(np.float64) - warped)[ok]
     rot = -np.linalg.solve(jac.T @ jac, jac.T @ diff) * 1000
     return rot, int(ok.sum()), float(np.sqrt(np.mean(diff ** 2)))
 
@@ -110,11 +101,15 @@ def main():
         sys.exit(f"{args.dataset}: no calib.txt: the check reads the KITTI layout's pinhole "
                  "cameras (a rig.toml layout's lens model is not modelled here)")
     poses = read_poses(os.path.join(args.dataset, "gt_poses.txt"))
-    f, cx, cy = camera(args.dataset)
+    f, cx, cy, _ = rig(args.dataset)
     total = np.zeros(3)
     print("step      x mrad   y mrad   z mrad   pixels   grey RMS")
-    for k in range(max(args.first, 1), min(args.last, len(poses))):
-        rot, n, rms = step_rotation(args.dataset, poses, k, f, cx, cy)
+    first = max(args.first, 1)
+    after = frame(args.dataset, first - 1)
+    for k in range(first, min(args.last, len(poses))):
+        # Each frame is read once: this step's later frame is the next step's earlier one.
+        before, after = after, frame(args.dataset, k)
+        rot, n, rms = step_rotation(before, after, poses, k, f, cx, cy)
         total += rot
         print(f"{k:5d}  {rot[0]:8.3f} {rot[1]:8.3f} {rot[2]:8.3f}  {n:7d}   {rms:6.2f}")
     print(f"sum    {total[0]:8.3f} {total[1]:8.3f} {total[2]:8.3f}")

@@ -29,7 +29,7 @@ import sys
 import numpy as np
 
 from peer_vo import DatasetError
-from precision import Depths, read_model, rig
+from precision import Depths, image_motion, read_model, rig, to_world
 from steps import read_poses
 
 # Observations further than this from their track's true projection are blunders (px).
@@ -40,18 +40,18 @@ MIN_OBSERVATIONS = 20
 AGES = ((1, 1), (2, 3), (4, 6), (7, 10**6))
 
 
-def starts(images, poses, depths, cam, last):
-    """Per track: the epoch of its first left observation and the true point behind it
-    (None where the depth map cannot say)."""
-    f, cx, cy = cam
+def starts(images, poses, depths, cam, first, last):
+    """Per track observed in first..last: the epoch of its first left observation and the
+    true point behind it (None where the depth map cannot say). Only the depth maps where
+    those tracks start are read."""
+    wanted = {p for k in range(first, last) for p in images.get(2 * k + 1, {})}
     out = {}
-    for k in range(last + 1):
+    for k in range(last):
         for point, (u, v) in images.get(2 * k + 1, {}).items():
-            if point in out:
+            if point not in wanted or point in out:
                 continue
             z = depths.at(k, u, v)
-            out[point] = None if z is None else (
-                k, (poses[k] @ np.array([(u - cx) / f * z, (v - cy) / f * z, z, 1.0]))[:3])
+            out[point] = None if z is None else (k, to_world(poses[k], u, v, z, *cam))
     return out
 
 
@@ -76,10 +76,7 @@ def residuals(images, poses, start, cam, k):
 def implied_pose(rows, f):
     """The small pose offset (mrad about x, y, z; mm along x, y, z) that moves the true
     projections onto the observations."""
-    x, y, z = rows[:, 4], rows[:, 5], rows[:, 6]
-    zero = np.zeros_like(x)
-    ju = np.stack([f * x * y, -f * (1 + x * x), f * y, -f / z, zero, f * x / z], 1)
-    jv = np.stack([f * (1 + y * y), -f * x * y, -f * x, zero, -f / z, f * y / z], 1)
+    ju, jv = image_motion(rows[:, 4], rows[:, 5], rows[:, 6], f)
     jac = np.vstack([ju, jv])
     diff = np.concatenate([rows[:, 2], rows[:, 3]])
     return np.linalg.lstsq(jac, diff, rcond=None)[0] * 1000
@@ -104,7 +101,7 @@ def main():
     poses = read_poses(os.path.join(args.dataset, "gt_poses.txt"))
     images = read_model(args.run)
     last = min(args.last, len(poses))
-    start = starts(images, poses, Depths(args.dataset), cam, last)
+    start = starts(images, poses, Depths(args.dataset), cam, args.first, last)
     print("epoch   obs    x mrad  y mrad  z mrad    x mm    y mm    z mm")
     pooled, offsets = [], []
     for k in range(args.first, last):
