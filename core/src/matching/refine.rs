@@ -109,18 +109,6 @@ const S: usize = 2 * MAX_REFINE_RADIUS + 1;
 /// every lane of [`window_sums`] reads inside a row.
 const R: usize = T + S - 1;
 
-/// Bilinear sample at (x, y); the caller guarantees `0 <= x < w - 1`, `0 <= y < h - 1`.
-#[inline]
-fn bilinear(img: &ImageView<'_>, x: f32, y: f32) -> f32 {
-    let (c, r) = (x as usize, y as usize);
-    let (fx, fy) = (x - c as f32, y - r as f32);
-    let r0 = img.row(r);
-    let r1 = img.row(r + 1);
-    let top = r0[c] as f32 * (1.0 - fx) + r0[c + 1] as f32 * fx;
-    let bot = r1[c] as f32 * (1.0 - fx) + r1[c + 1] as f32 * fx;
-    top * (1.0 - fy) + bot * fy
-}
-
 /// NCC of a window (its sum, sum of squares and cross product with the zero-mean
 /// template of squared norm `tnorm`, over `cnt` samples); -1 for a flat window.
 #[inline]
@@ -251,9 +239,25 @@ pub fn sample_template(
     if !at.iter().all(|v| v.is_finite()) || !inside(img, at[0], at[1], hf) {
         return Err(RefineError::Border);
     }
+    // Bilinear samples at `at + (u, v) - h`, the whole and fractional parts of each
+    // column and row computed once rather than per sample. They are computed per column
+    // and per row, not once for the grid: where a coordinate crosses a power of two its
+    // rounding, and so its fraction, changes.
+    let mut cols = [(0usize, 0f32); T];
+    for (u, col) in cols[..n].iter_mut().enumerate() {
+        let x = at[0] + u as f32 - hf;
+        let c = x as usize;
+        *col = (c, x - c as f32);
+    }
     for v in 0..n {
-        for u in 0..n {
-            tpl[v * n + u] = bilinear(img, at[0] + u as f32 - hf, at[1] + v as f32 - hf);
+        let y = at[1] + v as f32 - hf;
+        let r = y as usize;
+        let fy = y - r as f32;
+        let (r0, r1) = (img.row(r), img.row(r + 1));
+        for (t, &(c, fx)) in tpl[v * n..(v + 1) * n].iter_mut().zip(&cols[..n]) {
+            let top = r0[c] as f32 * (1.0 - fx) + r0[c + 1] as f32 * fx;
+            let bot = r1[c] as f32 * (1.0 - fx) + r1[c + 1] as f32 * fx;
+            *t = top * (1.0 - fy) + bot * fy;
         }
     }
     Ok(())

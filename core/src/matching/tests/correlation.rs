@@ -571,3 +571,45 @@ fn a_peak_reports_the_precision_of_its_match() {
         .unwrap();
     assert!(p.sigma[0] > 0.0 && p.sigma[1] == p.sigma[0], "{p:?}");
 }
+
+/// The template is sampled with each column's and row's bilinear weights computed once;
+/// the samples are the per-sample bilinear interpolation's to the bit, also where the
+/// coordinates cross a power of two (127.x to 128.x: there the fractions of the columns
+/// differ in their last bits).
+#[test]
+fn template_samples_are_the_bilinear_interpolation_to_the_bit() {
+    let (w, h) = (300usize, 200usize);
+    let img: Vec<u8> = (0..w * h)
+        .map(|i| ((i * 7919 + (i / w) * 31) % 251) as u8)
+        .collect();
+    let iv = view(&img, w, h);
+    let reference = |x: f32, y: f32| {
+        let (c, r) = (x as usize, y as usize);
+        let (fx, fy) = (x - c as f32, y - r as f32);
+        let p = |c: usize, r: usize| img[r * w + c] as f32;
+        let top = p(c, r) * (1.0 - fx) + p(c + 1, r) * fx;
+        let bot = p(c, r + 1) * (1.0 - fx) + p(c + 1, r + 1) * fx;
+        top * (1.0 - fy) + bot * fy
+    };
+    for (at, half) in [
+        ([127.731f32, 63.917f32], 4usize),
+        ([255.6031, 127.7013], 7),
+        ([40.5, 30.25], 3),
+        ([100.0, 100.0], 1),
+    ] {
+        let mut tpl = [0f32; refine::TEMPLATE_LEN];
+        refine::sample_template(&iv, at, half, &mut tpl).unwrap();
+        let n = 2 * half + 1;
+        for v in 0..n {
+            for u in 0..n {
+                let x = at[0] + u as f32 - half as f32;
+                let y = at[1] + v as f32 - half as f32;
+                assert_eq!(
+                    tpl[v * n + u].to_bits(),
+                    reference(x, y).to_bits(),
+                    "at {at:?}, sample ({u}, {v})"
+                );
+            }
+        }
+    }
+}
