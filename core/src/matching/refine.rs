@@ -109,6 +109,16 @@ const S: usize = 2 * MAX_REFINE_RADIUS + 1;
 /// every lane of [`window_sums`] reads inside a row.
 const R: usize = T + S - 1;
 
+/// The bilinear sample between columns `c`, `c + 1` of the rows `top` and `bot` at the
+/// fractions `fx` across and `fy` down: the one formula every sampler here uses, so
+/// their samples agree to the bit.
+#[inline]
+fn bilinear(top: &[u8], bot: &[u8], c: usize, fx: f32, fy: f32) -> f32 {
+    let t = top[c] as f32 * (1.0 - fx) + top[c + 1] as f32 * fx;
+    let b = bot[c] as f32 * (1.0 - fx) + bot[c + 1] as f32 * fx;
+    t * (1.0 - fy) + b * fy
+}
+
 /// NCC of a window (its sum, sum of squares and cross product with the zero-mean
 /// template of squared norm `tnorm`, over `cnt` samples); -1 for a flat window.
 #[inline]
@@ -148,9 +158,7 @@ fn sample_region(
         let (top, bot) = (img.row(r0 + v), img.row(r0 + v + 1));
         let (top, bot) = (&top[c0..c0 + w + 1], &bot[c0..c0 + w + 1]);
         for u in 0..w {
-            let t = top[u] as f32 * (1.0 - fx) + top[u + 1] as f32 * fx;
-            let b = bot[u] as f32 * (1.0 - fx) + bot[u + 1] as f32 * fx;
-            out[v * R + u] = t * (1.0 - fy) + b * fy;
+            out[v * R + u] = bilinear(top, bot, u, fx, fy);
         }
     }
 }
@@ -255,9 +263,7 @@ pub fn sample_template(
         let fy = y - r as f32;
         let (r0, r1) = (img.row(r), img.row(r + 1));
         for (t, &(c, fx)) in tpl[v * n..(v + 1) * n].iter_mut().zip(&cols[..n]) {
-            let top = r0[c] as f32 * (1.0 - fx) + r0[c + 1] as f32 * fx;
-            let bot = r1[c] as f32 * (1.0 - fx) + r1[c + 1] as f32 * fx;
-            *t = top * (1.0 - fy) + bot * fy;
+            *t = bilinear(r0, r1, c, fx, fy);
         }
     }
     Ok(())
