@@ -110,12 +110,12 @@ const S: usize = 2 * MAX_REFINE_RADIUS + 1;
 const R: usize = T + S - 1;
 
 /// The bilinear sample between columns `c`, `c + 1` of the rows `top` and `bot` at the
-/// fractions `fx` across and `fy` down: the one formula every sampler here uses, so
-/// their samples agree to the bit.
+/// fractions `fx` across and `fy` down: the one formula every sampler here uses (of the
+/// image's grey levels and of a template's samples), so their samples agree to the bit.
 #[inline]
-fn bilinear(top: &[u8], bot: &[u8], c: usize, fx: f32, fy: f32) -> f32 {
-    let t = top[c] as f32 * (1.0 - fx) + top[c + 1] as f32 * fx;
-    let b = bot[c] as f32 * (1.0 - fx) + bot[c + 1] as f32 * fx;
+fn bilinear<P: Copy + Into<f32>>(top: &[P], bot: &[P], c: usize, fx: f32, fy: f32) -> f32 {
+    let t = top[c].into() * (1.0 - fx) + top[c + 1].into() * fx;
+    let b = bot[c].into() * (1.0 - fx) + bot[c + 1].into() * fx;
     t * (1.0 - fy) + b * fy
 }
 
@@ -287,17 +287,20 @@ pub fn magnify_template(
     let inv = 1.0 / scale;
     for v in 0..n {
         let y = hf + (v as f32 - hf) * inv;
-        let (r, fy) = split(y, n);
         for u in 0..n {
             let x = hf + (u as f32 - hf) * inv;
-            let (c, fx) = split(x, n);
-            let at = |rr: usize, cc: usize| tpl[rr * n + cc];
-            let top = at(r, c) * (1.0 - fx) + at(r, c + 1) * fx;
-            let bot = at(r + 1, c) * (1.0 - fx) + at(r + 1, c + 1) * fx;
-            out[v * n + u] = top * (1.0 - fy) + bot * fy;
+            out[v * n + u] = template_sample(tpl, n, x, y);
         }
     }
     true
+}
+
+/// The bilinear sample of the `n x n` template `tpl` at (`x`, `y`) in `0..=n - 1`,
+/// template pixels from its top left sample.
+pub fn template_sample(tpl: &[f32; TEMPLATE_LEN], n: usize, x: f32, y: f32) -> f32 {
+    let (c, fx) = split(x, n);
+    let (r, fy) = split(y, n);
+    bilinear(&tpl[r * n..], &tpl[(r + 1) * n..], c, fx, fy)
 }
 
 /// Whole and fractional parts of a template coordinate, the whole part kept below
