@@ -4,11 +4,13 @@
 //! distance with early exit), `grid` (spatial index), `search` (the shared
 //! mutual/ratio matcher), `stereo` (epipolar bands), `temporal` (guided windows),
 //! `predict` (motion predictions), `quad` (loop closure), `spread` (Von Gruber
-//! regions), `tracks`, `refine` (NCC sub-pixel), and `matcher` which runs an epoch.
+//! regions), `tracks`, `refine` (NCC sub-pixel), `lsm` (least-squares matching), and
+//! `matcher` which runs an epoch.
 
 pub(crate) mod config;
 pub(crate) mod distance;
 pub(crate) mod grid;
+pub(crate) mod lsm;
 pub(crate) mod matcher;
 pub(crate) mod motion;
 pub(crate) mod predict;

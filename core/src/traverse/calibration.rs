@@ -53,7 +53,8 @@ impl Traverse<'_> {
     /// The score test after an adjustment whose a-posteriori sigma is `sigma0`:
     /// corrects the held calibration when the test rejects it at `persistence`
     /// consecutive epochs and the correction matters, or at `sustained` consecutive
-    /// epochs whatever the correction's size (returns true: the window must be adjusted
+    /// epochs with a smaller correction that still exceeds `sustained_min_effect_px`
+    /// (returns true: the window must be adjusted
     /// again). After `epochs` epochs the calibration, held or estimated, is kept as it
     /// is and leaves the adjustment.
     pub(super) fn check_calibration(&mut self, sigma0: f64) -> bool {
@@ -72,16 +73,21 @@ impl Traverse<'_> {
             if let Ok(test) = self.window.calibration_test(sigma0) {
                 let critical = chi2_quantile(1.0 - check.level, test.dof as f64);
                 let px = self.cfg.rig.right.pixel_size_mm[0];
-                let significant = test.statistic > critical;
-                let matters =
-                    significant && self.window.correction_effect(&test) > check.min_effect_px * px;
+                let effect = if test.statistic > critical {
+                    self.window.correction_effect(&test)
+                } else {
+                    0.0
+                };
+                let matters = effect > check.min_effect_px * px;
+                let persists = effect > check.sustained_min_effect_px * px;
                 let count = |run: u32, now: bool| if now { run + 1 } else { 0 };
                 self.calibration_rejections = count(self.calibration_rejections, matters);
-                self.calibration_significant = count(self.calibration_significant, significant);
+                self.calibration_significant = count(self.calibration_significant, persists);
                 // A disparity offset of a tenth of a pixel moves the newest epoch's
                 // observations by less than the effect asked of a correction, but the
                 // scale of every step by half a per cent; rejected epoch after epoch, it
-                // is wrong, however small its step.
+                // is wrong. A step of a few hundredths of a pixel is not such an offset
+                // but a small systematic error that precise matching makes significant.
                 if self.calibration_rejections >= check.persistence
                     || self.calibration_significant >= check.sustained
                 {

@@ -209,8 +209,8 @@ pub struct Traverse<'a> {
     /// Consecutive epochs whose calibration test rejected the calibration with a
     /// correction that matters (`CalibrationCheck::min_effect_px`).
     calibration_rejections: u32,
-    /// Consecutive epochs the score test rejected the calibration, whatever the
-    /// correction's effect.
+    /// Consecutive epochs the score test rejected the calibration with a correction
+    /// of at least `CalibrationCheck::sustained_min_effect_px`.
     calibration_significant: u32,
     /// The stereo pairs' offset from their epipolar lines has been measured
     /// (`Traverse::check_epipolar_offset`).

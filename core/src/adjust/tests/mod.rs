@@ -43,6 +43,18 @@ pub(crate) fn load<'a>(
     arena: &mut Arena<'a>,
     seed: u64,
 ) -> (Window<'a>, Vec<u32>) {
+    load_weighted(s, cfg, arena, seed, 1.0)
+}
+
+/// [`load`] with the observations' weights scaled by `weight_scale` (their a-priori
+/// sigma by its inverse square root).
+pub(crate) fn load_weighted<'a>(
+    s: &Scene,
+    cfg: AdjustConfig,
+    arena: &mut Arena<'a>,
+    seed: u64,
+    weight_scale: f64,
+) -> (Window<'a>, Vec<u32>) {
     let mut rng = Rng(seed);
     let mut w = Window::new(cfg, &s.rig, arena).unwrap();
     for (k, p) in s.poses.iter().enumerate() {
@@ -65,7 +77,7 @@ pub(crate) fn load<'a>(
             .unwrap()
         })
         .collect();
-    let wt = 1.0 / (SIGMA_MM * SIGMA_MM);
+    let wt = weight_scale / (SIGMA_MM * SIGMA_MM);
     for o in &s.observations {
         let (e, c, p, xy) = (&o.epoch, &o.camera, &o.point, &o.xy);
         let cam = *c;

@@ -32,7 +32,9 @@ use super::geometry::{
 };
 use super::propagation::{propagate, rigid_transport_turn, standard_deviations};
 use super::quality::ChiSquareTest;
-use super::weighting::{cauchy_factor, median_by_rank, CHI2_2_MEDIAN, SEED_REWEIGHT};
+use super::weighting::{
+    cauchy_factor, median_by_rank, CHI2_2_MEDIAN, MIN_SNOOPING_SCALE, SEED_REWEIGHT,
+};
 use crate::budget::{slice_bytes, Arena, ComponentKind, MemoryBudget, OutOfMemory};
 use crate::camera::{Camera, RelativeOrientation};
 use crate::camera::{Pose, Rig};

@@ -220,13 +220,14 @@ impl<'a> Window<'a> {
         self.apply_flags(critical, round, scale2)
     }
 
-    /// Median of the accepted observations' `T` (in `residuals`) over chi2_2's median:
+    /// Median of the accepted observations' `T` (in `residuals`) over chi2_2's median
+    /// (at least [`MIN_SNOOPING_SCALE`]):
     /// 1 when the weights match the noise, and right also with the seed's weights
     /// whose scale is arbitrary. Selected in place (no copy of the residuals).
     pub(super) fn median_scale(&self) -> f64 {
         let (res, obs) = (&*self.residuals, &*self.obs);
         let used = |i: usize| (obs[i].factor > 0.0 && res[i].is_finite()).then_some(res[i]);
-        (median_by_rank(self.n_obs, used) / CHI2_2_MEDIAN).max(1e-30)
+        (median_by_rank(self.n_obs, used) / CHI2_2_MEDIAN).max(MIN_SNOOPING_SCALE)
     }
 
     /// Detection (Baarda's DIA order): after plain least squares, the data are

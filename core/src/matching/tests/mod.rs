@@ -714,3 +714,4 @@ fn config_is_validated() {
 }
 
 mod correlation;
+mod lsm;
