@@ -153,25 +153,13 @@ fn sample_region(
     (w, h): (usize, usize),
     out: &mut [f32; R * R],
 ) {
-    sample_grid(img, origin, (w, h), out, R);
-}
-
-/// [`sample_region`] with the row stride `stride`: every sample of the grid has the
-/// same fractions, so the weights are computed once.
-fn sample_grid(
-    img: &ImageView<'_>,
-    origin: [f32; 2],
-    (w, h): (usize, usize),
-    out: &mut [f32],
-    stride: usize,
-) {
     let (c0, r0) = (origin[0] as usize, origin[1] as usize);
     let (fx, fy) = (origin[0] - c0 as f32, origin[1] - r0 as f32);
     for v in 0..h {
         let (top, bot) = (img.row(r0 + v), img.row(r0 + v + 1));
         let (top, bot) = (&top[c0..c0 + w + 1], &bot[c0..c0 + w + 1]);
         for u in 0..w {
-            out[v * stride + u] = bilinear(top, bot, u, fx, fy);
+            out[v * R + u] = bilinear(top, bot, u, fx, fy);
         }
     }
 }
