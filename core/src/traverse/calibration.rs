@@ -73,26 +73,27 @@ impl Traverse<'_> {
             if let Ok(test) = self.window.calibration_test(sigma0) {
                 let critical = chi2_quantile(1.0 - check.level, test.dof as f64);
                 let px = self.cfg.rig.right.pixel_size_mm[0];
+                // Only a rejection's step counts (an accepted calibration asks for none).
                 let effect = if test.statistic > critical {
                     self.window.correction_effect(&test)
                 } else {
                     0.0
                 };
                 let matters = effect > check.min_effect_px * px;
-                let persists = effect > check.sustained_min_effect_px * px;
+                let sustained = effect > check.sustained_min_effect_px * px;
                 let count = |run: u32, now: bool| if now { run + 1 } else { 0 };
                 self.calibration_rejections = count(self.calibration_rejections, matters);
-                self.calibration_significant = count(self.calibration_significant, persists);
+                self.calibration_sustained = count(self.calibration_sustained, sustained);
                 // A disparity offset of a tenth of a pixel moves the newest epoch's
                 // observations by less than the effect asked of a correction, but the
                 // scale of every step by half a per cent; rejected epoch after epoch, it
                 // is wrong. A step of a few hundredths of a pixel is not such an offset
                 // but a small systematic error that precise matching makes significant.
                 if self.calibration_rejections >= check.persistence
-                    || self.calibration_significant >= check.sustained
+                    || self.calibration_sustained >= check.sustained
                 {
                     self.calibration_rejections = 0;
-                    self.calibration_significant = 0;
+                    self.calibration_sustained = 0;
                     self.correct_calibration(&test);
                     return true;
                 }

@@ -211,7 +211,7 @@ pub struct Traverse<'a> {
     calibration_rejections: u32,
     /// Consecutive epochs the score test rejected the calibration with a correction
     /// of at least `CalibrationCheck::sustained_min_effect_px`.
-    calibration_significant: u32,
+    calibration_sustained: u32,
     /// The stereo pairs' offset from their epipolar lines has been measured
     /// (`Traverse::check_epipolar_offset`).
     epipolar_offset_checked: bool,
@@ -272,7 +272,7 @@ impl<'a> Traverse<'a> {
             last_solve_error: None,
             calibration_corrections: 0,
             calibration_rejections: 0,
-            calibration_significant: 0,
+            calibration_sustained: 0,
             epipolar_offset_checked: false,
             odometer_count: None,
         })

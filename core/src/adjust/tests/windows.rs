@@ -468,6 +468,17 @@ fn seed_weighting_schemes_and_seed_reweighting() {
     );
 }
 
+/// A 2 cm GNSS fix of epoch `e` of `s`: its true centre with noise of that sigma.
+fn set_gnss_fix(w: &mut Window<'_>, s: &Scene, e: usize, rng: &mut Rng) {
+    let c = s.poses[e].centre;
+    let g = [
+        c[0] + 0.02 * rng.normal(),
+        c[1] + 0.02 * rng.normal(),
+        c[2] + 0.02 * rng.normal(),
+    ];
+    w.set_gnss(e as u32, g, 0.02).unwrap();
+}
+
 #[test]
 fn gnss_and_odometer_constraints_enter_the_adjustment() {
     // GNSS on the first and last epochs only (an outage in between) and odometer legs.
@@ -487,13 +498,7 @@ fn gnss_and_odometer_constraints_enter_the_adjustment() {
     let (mut w, ids) = load(&s, cfg, &mut arena, 52);
     let mut rng = Rng(53);
     for e in [0usize, 5] {
-        let c = s.poses[e].centre;
-        let g = [
-            c[0] + 0.02 * rng.normal(),
-            c[1] + 0.02 * rng.normal(),
-            c[2] + 0.02 * rng.normal(),
-        ];
-        w.set_gnss(e as u32, g, 0.02).unwrap();
+        set_gnss_fix(&mut w, &s, e, &mut rng);
     }
     for e in 1..6 {
         let (a, b) = (s.poses[e - 1].centre, s.poses[e].centre);
@@ -531,14 +536,8 @@ fn precise_tie_points_beside_gnss_fixes_are_not_flagged() {
     // The observations weighted as if 20 times less precise than they are.
     let (mut w, _) = load_weighted(&s, cfg, &mut arena, 62, 1.0 / 400.0);
     let mut rng = Rng(63);
-    for (e, p) in s.poses.iter().enumerate() {
-        let c = p.centre;
-        let g = [
-            c[0] + 0.02 * rng.normal(),
-            c[1] + 0.02 * rng.normal(),
-            c[2] + 0.02 * rng.normal(),
-        ];
-        w.set_gnss(e as u32, g, 0.02).unwrap();
+    for e in 0..s.poses.len() {
+        set_gnss_fix(&mut w, &s, e, &mut rng);
     }
     let r = w.solve().unwrap();
     let n = w.observations().len();
