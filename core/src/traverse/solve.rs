@@ -310,6 +310,9 @@ fn observation(
 /// too, the per-step errors fell further on calibrated rigs, but the window then
 /// balanced the images worse against what else it holds (a calibration corrected
 /// from the first epochs, GNSS fixes before an outage): `bench/traverse/README.md`.
+/// Weighted by least-squares matching's own precision (`left-weights.patch` there),
+/// the rotation drift fell, not the translation drift, and both balances got worse
+/// again: a track's errors are correlated, which a weight per observation does not see.
 pub(super) fn observation_sigma_px(sigma_px: f64, peak_sigma: f32) -> f64 {
     use super::defaults::{PEAK_SIGMA_FLOOR_PX, PEAK_SIGMA_GAIN, TYPICAL_PEAK_SIGMA_PX};
     if !(peak_sigma > 0.0 && peak_sigma.is_finite()) {
