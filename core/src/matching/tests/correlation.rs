@@ -403,6 +403,48 @@ fn a_recentred_correlation_does_not_lean_towards_its_start() {
     assert!(centred < 0.005, "re-centred: {centred} px");
 }
 
+#[test]
+fn a_converging_rigs_stereo_match_does_not_lean_towards_its_start() {
+    let (w, h) = (120, 60);
+    let left = texture(w, h, 0.0);
+    // right(c) = left(c + 10.37): left (60, 30) is at right (49.63, 30).
+    let right = texture(w, h, 10.37);
+    let (li, ri) = (view(&left, w, h), view(&right, w, h));
+    let mut tpl = [0f32; refine::TEMPLATE_LEN];
+    refine::sample_template(&li, [60.0, 30.0], 4, &mut tpl).unwrap();
+    // A converging rig's search: both axes, then the left-right check.
+    let cfg = RefineConfig {
+        min_ncc: 0.9,
+        rows_only: false,
+        ..Default::default()
+    };
+    let range = |r: (f32, f32), x: f32| (r.0.min(x), r.1.max(x));
+    let empty = (f32::MAX, f32::MIN);
+    let (mut single, mut xs, mut ys) = (empty, empty, empty);
+    for i in -4..=4 {
+        for j in [-0.3f32, 0.0, 0.3] {
+            let start = [49.63 + 0.1 * i as f32, 30.0 + j];
+            let fit = Correlator::new()
+                .correlate(&tpl, 4, &ri, start, (2, 2), 0.9)
+                .unwrap();
+            single = range(single, fit.at[0]);
+            let p =
+                refine::refine_checked(&mut Correlator::new(), &li, &ri, [60.0, 30.0], start, &cfg)
+                    .unwrap()
+                    .at;
+            (xs, ys) = (range(xs, p[0]), range(ys, p[1]));
+        }
+    }
+    // Measured: the single fits from 49.21 to 49.87, the returned positions within
+    // 0.005 px of each other and 0.041 px of the truth (least squares' own error on
+    // this texture, the same from every start: `bench/traverse/README.md`).
+    assert!(single.1 - single.0 > 0.3, "single fits {single:?}");
+    assert!(xs.1 - xs.0 < 0.005 && ys.1 - ys.0 < 0.005, "{xs:?} {ys:?}");
+    let off = (xs.0 - 49.63).abs().max((xs.1 - 49.63).abs());
+    let off = off.max((ys.0 - 30.0).abs()).max((ys.1 - 30.0).abs());
+    assert!(off < 0.05, "{off} px from the truth");
+}
+
 /// `correlate` (lanes of offsets summed side by side) against a window-by-window NCC in
 /// f64 with the same sub-pixel parabola: the same peak, the same position.
 #[test]
