@@ -61,14 +61,15 @@ const MIN_MISMATCH: f32 = 1e-4;
 /// keypoint, where its grid starts. The check still compares the single fits both ways,
 /// so which matches pass is unchanged; measured with the re-centred positions, 100
 /// rendered epochs of `photo-curves` went from 0.060 to 0.049 %, `hard` from 0.129 to
-/// 0.102 %. Off the rows (a converging rig's two-axis search) the re-centred position
+/// 0.102 %. Off the rows (the general rig geometry's two-axis search: a converging rig,
+/// lens distortion, a calibration with a relative rotation) the re-centred position
 /// was worse (`seed2014` 0.086 -> 0.112 %); there least-squares matching
 /// ([`Correlator::least_squares`]) ends the search instead, and where it does not
 /// settle the single fit stays. The single fit's lean towards its grid is a lean of
 /// the disparities, which the window takes for scale: on 24 draws of the converging
 /// rig's streets the drift fell to 0.75 of what it was with the single fit, and
 /// none of them missed the benchmark's bar, against 5 (`bench/traverse/README.md`,
-/// "Least squares on the stereo of a converging rig").
+/// "Least squares on the stereo of a converging rig, adopted").
 pub fn refine_checked(
     buf: &mut Correlator,
     left_img: &ImageView<'_>,
