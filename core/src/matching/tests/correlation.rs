@@ -365,15 +365,22 @@ fn magnified_template_keeps_its_centre_and_scales_a_ramp() {
     assert!(!magnify_template(&tpl, 0, 1.5, &mut out));
 }
 
+/// A 120 x 60 pair of `tex` in which left (60, 30) is at right (49.63, 30)
+/// (right(c) = left(c + 10.37)), and the left template (half-size 4) around (60, 30).
+fn shifted_pair(
+    tex: fn(usize, usize, f64) -> Vec<u8>,
+) -> (Vec<u8>, Vec<u8>, [f32; refine::TEMPLATE_LEN]) {
+    let (left, right) = (tex(120, 60, 0.0), tex(120, 60, 10.37));
+    let mut tpl = [0f32; refine::TEMPLATE_LEN];
+    refine::sample_template(&view(&left, 120, 60), [60.0, 30.0], 4, &mut tpl).unwrap();
+    (left, right, tpl)
+}
+
 #[test]
 fn a_recentred_correlation_does_not_lean_towards_its_start() {
     let (w, h) = (120, 60);
-    let left = broad_texture(w, h, 0.0);
-    // right(c) = left(c + 10.37): left x = 60 is at right x = 49.63.
-    let right = broad_texture(w, h, 10.37);
-    let (li, ri) = (view(&left, w, h), view(&right, w, h));
-    let mut tpl = [0f32; refine::TEMPLATE_LEN];
-    refine::sample_template(&li, [60.0, 30.0], 4, &mut tpl).unwrap();
+    let (_, right, tpl) = shifted_pair(broad_texture);
+    let ri = view(&right, w, h);
     // The same match searched from starts a fraction of a pixel either side of it.
     let spread = |f: &dyn Fn([f32; 2]) -> [f32; 2]| {
         let xs: std::vec::Vec<f32> = (-4..=4)
@@ -406,12 +413,8 @@ fn a_recentred_correlation_does_not_lean_towards_its_start() {
 #[test]
 fn a_converging_rigs_stereo_match_does_not_lean_towards_its_start() {
     let (w, h) = (120, 60);
-    let left = texture(w, h, 0.0);
-    // right(c) = left(c + 10.37): left (60, 30) is at right (49.63, 30).
-    let right = texture(w, h, 10.37);
+    let (left, right, tpl) = shifted_pair(texture);
     let (li, ri) = (view(&left, w, h), view(&right, w, h));
-    let mut tpl = [0f32; refine::TEMPLATE_LEN];
-    refine::sample_template(&li, [60.0, 30.0], 4, &mut tpl).unwrap();
     // A converging rig's search: both axes, then the left-right check.
     let cfg = RefineConfig {
         min_ncc: 0.9,
