@@ -54,9 +54,8 @@ impl Traverse<'_> {
     /// corrects the held calibration when the test rejects it at `persistence`
     /// consecutive epochs and the correction matters, or at `sustained` consecutive
     /// epochs with a smaller correction that still exceeds `sustained_min_effect_px`
-    /// (returns true: the window must be adjusted
-    /// again). After `epochs` epochs the calibration, held or estimated, is kept as it
-    /// is and leaves the adjustment.
+    /// (returns true: the window must be adjusted again). After `epochs` epochs the
+    /// calibration, held or estimated, is kept as it is and leaves the adjustment.
     pub(super) fn check_calibration(&mut self, sigma0: f64) -> bool {
         let Some(check) = self.cfg.calibration_check else {
             return false;

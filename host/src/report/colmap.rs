@@ -259,7 +259,9 @@ impl std::fmt::Display for Fixed4 {
             return write!(f, "{x:.4}");
         }
         let units = (x * 1e4).round_ties_even() as i64;
-        let sign = if units < 0 { "-" } else { "" };
+        // The sign of the float, not of the rounded units: `{:.4}` writes -0.0000 for
+        // a negative coordinate that rounds to zero.
+        let sign = if x.is_sign_negative() { "-" } else { "" };
         let u = units.unsigned_abs();
         write!(f, "{sign}{}.{:04}", u / 10_000, u % 10_000)
     }
@@ -328,7 +330,7 @@ mod tests {
 
     #[test]
     fn pixel_coordinates_beyond_the_integers_are_formatted_exactly() {
-        for x in [1e12, -3.5e15, f64::INFINITY, f64::NAN] {
+        for x in [1e12, -3.5e15, f64::INFINITY, f64::NAN, -0.00001, -0.0] {
             assert_eq!(Fixed4(x).to_string(), format!("{x:.4}"));
         }
         assert_eq!(Fixed4(640.25).to_string(), "640.2500");
