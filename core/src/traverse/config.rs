@@ -117,8 +117,9 @@ pub struct CalibrationCheck {
     /// Significance level of the test (probability of correcting a good calibration
     /// at one epoch).
     pub level: f64,
-    /// Smallest correction applied: the RMS displacement (pixels) it causes on the
-    /// newest epoch's observations ([`crate::adjust::Window::correction_effect`]).
+    /// Smallest correction applied: the RMS displacement (pixels) that the mean of the
+    /// steps asked at every test so far causes on the newest epoch's observations
+    /// ([`crate::adjust::Window::correction_effect`]).
     pub min_effect_px: f64,
     /// Consecutive epochs that must reject the calibration before it is corrected: a
     /// wrong calibration is rejected at every epoch, a right one only now and then.

@@ -206,12 +206,8 @@ pub struct Traverse<'a> {
     last_solve_error: Option<AdjustError>,
     /// Corrections the calibration check applied so far.
     calibration_corrections: u32,
-    /// Consecutive epochs whose calibration test rejected the calibration with a
-    /// correction that matters (`CalibrationCheck::min_effect_px`).
-    calibration_rejections: u32,
-    /// Consecutive epochs the score test rejected the calibration with a correction
-    /// of at least `CalibrationCheck::sustained_min_effect_px`.
-    calibration_sustained: u32,
+    /// The calibration check's record of the tests since the calibration was last set.
+    calibration_verdicts: calibration::Verdicts,
     /// The stereo pairs' offset from their epipolar lines has been measured
     /// (`Traverse::check_epipolar_offset`).
     epipolar_offset_checked: bool,
@@ -271,8 +267,7 @@ impl<'a> Traverse<'a> {
             last_match: Default::default(),
             last_solve_error: None,
             calibration_corrections: 0,
-            calibration_rejections: 0,
-            calibration_sustained: 0,
+            calibration_verdicts: Default::default(),
             epipolar_offset_checked: false,
             odometer_count: None,
         })
