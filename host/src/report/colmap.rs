@@ -13,6 +13,7 @@
 //! COLMAP's distortion models, so the image points are written corrected, where a
 //! distortion-free camera with the same interior orientation would measure them. For
 //! a rig without distortion (KITTI, the rendered streets) they are the measured pixels.
+use super::fixed::Fixed;
 use super::records::TiePoint;
 use anyhow::{Context, Result};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
@@ -236,35 +237,12 @@ fn write_images(
         let list = points.get(&image.id).map_or(&[][..], Vec::as_slice);
         for (k, (xy, id)) in list.iter().enumerate() {
             let sep = if k == 0 { "" } else { " " };
-            write!(w, "{sep}{} {} {id}", Fixed4(xy[0]), Fixed4(xy[1]))?;
+            write!(w, "{sep}{} {} {id}", Fixed::<4>(xy[0]), Fixed::<4>(xy[1]))?;
         }
         writeln!(w)?;
     }
     w.flush()?;
     Ok(())
-}
-
-/// A pixel coordinate with four decimals, written through integers: `{:.4}` formats
-/// each float exactly, about 2 000 instructions a coordinate, 1 % of a run's on the
-/// hand-held walk's 100 000 observations. The same digits as `{:.4}` wherever the
-/// product by 10 000 is exact, as it is for every coordinate measured in single
-/// precision: exact ties round to even in both.
-struct Fixed4(f64);
-
-impl std::fmt::Display for Fixed4 {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let x = self.0;
-        // Far beyond any image, or not a number: the exact formatting.
-        if x.is_nan() || x.abs() >= 1e9 {
-            return write!(f, "{x:.4}");
-        }
-        let units = (x * 1e4).round_ties_even() as i64;
-        // The sign of the float, not of the rounded units: `{:.4}` writes -0.0000 for
-        // a negative coordinate that rounds to zero.
-        let sign = if x.is_sign_negative() { "-" } else { "" };
-        let u = units.unsigned_abs();
-        write!(f, "{sign}{}.{:04}", u / 10_000, u % 10_000)
-    }
 }
 
 fn write_points(path: &Path, tracks: &[Track]) -> Result<()> {
@@ -315,26 +293,6 @@ mod tests {
             relative_angles: [0.002, -0.01, 0.003],
             base_m: [0.4, 0.01, -0.02],
         }
-    }
-
-    proptest::proptest! {
-        #[test]
-        fn pixel_coordinates_have_the_digits_of_exact_formatting(x in -1e5f32..1e5, k in 0u32..32) {
-            // Single-precision measurements, plus the half pixel of COLMAP's origin, and
-            // the 32nd-pixel fractions where ties of the fifth decimal are exact.
-            for x in [f64::from(x) + PIXEL_ORIGIN, f64::from(x.trunc()) + f64::from(k) / 32.0] {
-                proptest::prop_assert_eq!(Fixed4(x).to_string(), format!("{x:.4}"));
-            }
-        }
-    }
-
-    #[test]
-    fn pixel_coordinates_beyond_the_integers_are_formatted_exactly() {
-        for x in [1e12, -3.5e15, f64::INFINITY, f64::NAN, -0.00001, -0.0] {
-            assert_eq!(Fixed4(x).to_string(), format!("{x:.4}"));
-        }
-        assert_eq!(Fixed4(640.25).to_string(), "640.2500");
-        assert_eq!(Fixed4(0.000049).to_string(), "0.0000");
     }
 
     #[test]

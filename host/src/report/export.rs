@@ -1,4 +1,5 @@
 //! Text exports other tools read: `eop.csv`, `points.ply` and E-Foto's two-file import.
+use super::fixed::Fixed;
 use super::records::{CameraEop, RunReport, TiePoint};
 use anyhow::{Context, Result};
 use std::fs::File;
@@ -148,7 +149,13 @@ pub fn write_efoto(dir: &Path, points: &[TiePoint], image_names: &[(usize, Strin
         )?;
         for m in &p.measurements {
             let image = efoto_image_index(m.epoch, m.camera);
-            writeln!(meas, "{image}\t{}\t{:.3}\t{:.3}", p.id, m.col, m.row)?;
+            writeln!(
+                meas,
+                "{image}\t{}\t{}\t{}",
+                p.id,
+                Fixed::<3>(m.col),
+                Fixed::<3>(m.row)
+            )?;
         }
     }
     let mut images = create(&dir.join("images.txt"))?;

@@ -7,6 +7,7 @@
 
 pub mod colmap;
 mod export;
+mod fixed;
 mod glance;
 pub(crate) mod html;
 mod points;
