@@ -17,6 +17,9 @@ use phototraverse_core::protocol::{
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
+/// Frame bytes per chunk packet by default (`run --chunk`, [`SessionOptions::chunk`]).
+pub const DEFAULT_CHUNK: usize = 256;
+
 /// Session tuning.
 #[derive(Debug, Clone)]
 pub struct SessionOptions {
@@ -38,7 +41,7 @@ pub struct SessionOptions {
 impl Default for SessionOptions {
     fn default() -> Self {
         SessionOptions {
-            chunk: 256,
+            chunk: DEFAULT_CHUNK,
             window: 64,
             timeout: Duration::from_secs(5),
             rto: Duration::from_millis(20),

@@ -117,7 +117,7 @@ pub struct LinkOptions {
     /// Largest frame payload per chunk packet. The session keeps chunks small enough
     /// for the firmware to hold one that arrives after a gap (its capabilities say
     /// how large), and shrinks them on a line that damages packets.
-    #[arg(long, default_value_t = 256)]
+    #[arg(long, default_value_t = crate::session::DEFAULT_CHUNK)]
     pub chunk: usize,
     /// Seconds without any answer, or with a write blocked (a firmware that takes no
     /// bytes), before the firmware is declared unresponsive and the run stops.
@@ -146,7 +146,7 @@ impl Default for LinkOptions {
             fault_seed: 1,
             fw_memory: 32 << 20,
             fw_processor: FirmwareProcessor::Traverse,
-            chunk: 256,
+            chunk: crate::session::DEFAULT_CHUNK,
             link_timeout: 5.0,
             progress_timeout: 30.0,
         }
