@@ -120,8 +120,10 @@ impl Traverse<'_> {
 /// the steps they asked for and the current runs of rejections.
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct Verdicts {
-    /// The steps asked at every test, accepted or rejected.
-    steps: CalibrationTest,
+    /// The sums of the steps asked at every test, accepted or rejected: the rig's and
+    /// the interior's ([`CalibrationTest::rig`], [`CalibrationTest::interior`]).
+    rig_sum: [f64; 6],
+    interior_sum: [f64; 6],
     tests: u32,
     /// Consecutive rejections whose correction matters (`min_effect_px`).
     persistent: u32,
@@ -167,17 +169,18 @@ impl Verdicts {
 
     /// Adds the step of `test` to the sum; returns the mean step so far.
     fn add(&mut self, test: &CalibrationTest) -> CalibrationTest {
+        let accumulate = |sum: &mut [f64; 6], step: &[f64; 6]| {
+            sum.iter_mut().zip(step).for_each(|(s, d)| *s += d);
+        };
+        accumulate(&mut self.rig_sum, &test.rig);
+        accumulate(&mut self.interior_sum, &test.interior);
         self.tests += 1;
         let n = self.tests as f64;
-        let mut mean = CalibrationTest::default();
-        let rig = (self.steps.rig.iter_mut().zip(&test.rig)).zip(mean.rig.iter_mut());
-        let interior =
-            (self.steps.interior.iter_mut().zip(&test.interior)).zip(mean.interior.iter_mut());
-        for ((sum, step), m) in rig.chain(interior) {
-            *sum += step;
-            *m = *sum / n;
+        CalibrationTest {
+            rig: self.rig_sum.map(|s| s / n),
+            interior: self.interior_sum.map(|s| s / n),
+            ..Default::default()
         }
-        mean
     }
 }
 

@@ -24,7 +24,7 @@ use std::path::Path;
 
 /// Added to the reports' pixel coordinates (centre of the top-left pixel = 0) to give
 /// COLMAP's (its corner = 0).
-const PIXEL_ORIGIN: f64 = 0.5;
+pub(super) const PIXEL_ORIGIN: f64 = 0.5;
 
 /// COLMAP's world-to-camera rotation and translation: `x_cam = R X + t`.
 type WorldToCamera = (Matrix3<f64>, Vector3<f64>);
