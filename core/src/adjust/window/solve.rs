@@ -2,6 +2,18 @@
 //! data snooping and the flags they leave.
 use super::*;
 
+/// What detection found in a solution.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Detection {
+    /// No evidence of blunders: the solution is accepted as it is.
+    Passes,
+    /// The global test failed (the observations' statistics were not computed).
+    GlobalTestFails,
+    /// An observation's statistic is past the bound: `residuals` hold the statistics
+    /// of every observation of this solution, which snooping starts from.
+    ObservationStandsOut,
+}
+
 impl<'a> Window<'a> {
     /// Levenberg-Marquardt to convergence with the current weight factors.
     /// Returns (iterations, converged).
@@ -110,10 +122,12 @@ impl<'a> Window<'a> {
                 let (it, conv) = self.least_squares(max_it)?;
                 report.iterations += it;
                 report.converged = conv;
-                if self.detection_passes()? {
+                let detection = self.detection()?;
+                if detection == Detection::Passes {
                     // Accepted as is.
                 } else if keep {
-                    self.snoop_rounds(critical, 1, &mut report)?;
+                    let fresh = detection == Detection::ObservationStandsOut;
+                    self.snoop_rounds(critical, 1, fresh, &mut report)?;
                 } else {
                     self.identify(critical, &mut report)?;
                 }
@@ -146,22 +160,32 @@ impl<'a> Window<'a> {
                 for o in self.obs[..self.n_obs].iter_mut() {
                     o.factor = 1.0;
                 }
-                self.snoop_rounds(critical, 0, report)?;
+                self.snoop_rounds(critical, 0, false, report)?;
             }
         }
         Ok(())
     }
 
     /// Snooping from the current solution until the excluded set is stable, then
-    /// a final solution for that set. `first_round` 1 skips the hysteresis-free start.
+    /// a final solution for that set. `first_round` 1 skips the hysteresis-free start;
+    /// `fresh`: `residuals` already hold the statistics of the current solution
+    /// ([`Detection::ObservationStandsOut`]), which the first round reads instead of
+    /// computing them again (a pass over every point and observation: on the hand-held
+    /// walk 0.26 G instructions of 34.9).
     pub(super) fn snoop_rounds(
         &mut self,
         critical: f64,
         first_round: usize,
+        fresh: bool,
         report: &mut Report,
     ) -> Result<(), AdjustError> {
         let max_it = self.cfg.max_iterations;
-        self.snoop(critical, first_round);
+        if fresh {
+            let scale2 = self.median_scale();
+            self.apply_flags(critical, first_round, scale2);
+        } else {
+            self.snoop(critical, first_round);
+        }
         let mut stable = false;
         for round in first_round + 1..=first_round + self.cfg.max_robust_rounds {
             let (it, conv) = self.least_squares(max_it)?;
@@ -234,13 +258,13 @@ impl<'a> Window<'a> {
     /// accepted without any exclusion when the global test passes and the
     /// largest `T` stays below the Bonferroni bound `-2 ln(0.05 / n)` (5 % for
     /// the whole set); otherwise the robust identification runs.
-    pub(super) fn detection_passes(&mut self) -> Result<bool, AdjustError> {
+    pub(super) fn detection(&mut self) -> Result<Detection, AdjustError> {
         let mut r = Report::default();
         self.global_test(&mut r)?;
         // Only the upper tail is evidence of blunders; a sigma0 below its bound says
         // the a-priori sigma was pessimistic, and identification would be wasted work.
         if r.chi2.statistic > r.chi2.upper {
-            return Ok(false);
+            return Ok(Detection::GlobalTestFails);
         }
         self.statistics();
         let scale2 = self.median_scale();
@@ -253,7 +277,11 @@ impl<'a> Window<'a> {
             .fold(0.0f64, |m, (_, t)| m.max(*t));
         // On the median scale, as snooping: a pessimistic a-priori sigma must not
         // hide blunders that stand out of the actual noise.
-        Ok(worst <= bound * scale2)
+        Ok(if worst <= bound * scale2 {
+            Detection::Passes
+        } else {
+            Detection::ObservationStandsOut
+        })
     }
 
     /// `T` of every observation into `residuals` (a-priori scale).

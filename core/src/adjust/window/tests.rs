@@ -291,3 +291,46 @@ fn gnss_lever_arm_jacobian_matches_numeric() {
         }
     }
 }
+
+/// Snooping's first round after detection reads the statistics detection computed
+/// for the same solution instead of computing them again: on a window with 2 %
+/// blunders and a pessimistic a-priori sigma (the global test passes, as on the
+/// traverse's windows; its kept exclusions and single round), the same exclusions and
+/// the same poses, to the bit, as from statistics computed afresh.
+#[test]
+fn snooping_from_the_statistics_of_detection_is_snooping_from_fresh_ones() {
+    use super::solve::Detection;
+    use crate::adjust::tests::{load_weighted, scene};
+    let s = scene(11, 6, 300, 0.02);
+    let cfg = AdjustConfig {
+        window: 6,
+        max_points: 300,
+        max_observations: s.observations.len(),
+        max_robust_rounds: 1,
+        keep_exclusions: true,
+        ..AdjustConfig::default()
+    };
+    let Robust::Snooping { critical } = cfg.robust else {
+        panic!("the default is snooping");
+    };
+    let snooped = |fresh: bool| {
+        let mut b = crate::budget::MemoryBudget::new();
+        cfg.budget(&mut b);
+        let mut mem = vec![0u8; b.total()];
+        let mut arena = Arena::new(&mut mem);
+        let (mut w, _) = load_weighted(&s, cfg, &mut arena, 3, 1e-3);
+        w.build_index();
+        w.least_squares(cfg.max_iterations).unwrap();
+        assert_eq!(w.detection().unwrap(), Detection::ObservationStandsOut);
+        let mut report = Report::default();
+        w.snoop_rounds(critical, 1, fresh, &mut report).unwrap();
+        let poses: std::vec::Vec<Pose> = (0..6).map(|e| w.epoch_pose(e).unwrap()).collect();
+        let flags: std::vec::Vec<bool> = w.observations().iter().map(|o| o.is_flagged()).collect();
+        (poses, flags)
+    };
+    let (poses, flags) = snooped(true);
+    let blunders = s.observations.iter().filter(|o| o.blunder).count();
+    let n = flags.iter().filter(|&&f| f).count();
+    assert!(n >= blunders, "{n} flagged, {blunders} blunders");
+    assert_eq!((poses, flags), snooped(false));
+}
