@@ -116,7 +116,7 @@ pub(crate) fn within(w: &Window, s: &Scene, ids: &[u32], k: f64) -> (usize, usiz
     (ok, n)
 }
 
-fn arena_for(cfg: &AdjustConfig) -> Vec<u8> {
+pub(crate) fn arena_for(cfg: &AdjustConfig) -> Vec<u8> {
     let mut b = MemoryBudget::new();
     cfg.budget(&mut b);
     vec![0u8; b.total()]

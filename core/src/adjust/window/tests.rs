@@ -300,7 +300,7 @@ fn gnss_lever_arm_jacobian_matches_numeric() {
 #[test]
 fn snooping_from_the_statistics_of_detection_is_snooping_from_fresh_ones() {
     use super::solve::Detection;
-    use crate::adjust::tests::{load_weighted, scene};
+    use crate::adjust::tests::{arena_for, load_weighted, scene};
     let s = scene(11, 6, 300, 0.02);
     let cfg = AdjustConfig {
         window: 6,
@@ -314,9 +314,7 @@ fn snooping_from_the_statistics_of_detection_is_snooping_from_fresh_ones() {
         panic!("the default is snooping");
     };
     let snooped = |fresh: bool| {
-        let mut b = crate::budget::MemoryBudget::new();
-        cfg.budget(&mut b);
-        let mut mem = vec![0u8; b.total()];
+        let mut mem = arena_for(&cfg);
         let mut arena = Arena::new(&mut mem);
         let (mut w, _) = load_weighted(&s, cfg, &mut arena, 3, 1e-3);
         w.build_index();
