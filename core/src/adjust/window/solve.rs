@@ -180,12 +180,11 @@ impl<'a> Window<'a> {
         report: &mut Report,
     ) -> Result<(), AdjustError> {
         let max_it = self.cfg.max_iterations;
-        if fresh {
-            let scale2 = self.median_scale();
-            self.apply_flags(critical, first_round, scale2);
-        } else {
-            self.snoop(critical, first_round);
+        if !fresh {
+            self.statistics();
         }
+        let scale2 = self.median_scale();
+        self.apply_flags(critical, first_round, scale2);
         let mut stable = false;
         for round in first_round + 1..=first_round + self.cfg.max_robust_rounds {
             let (it, conv) = self.least_squares(max_it)?;
