@@ -144,26 +144,21 @@ impl<'a> Window<'a> {
         report: &mut Report,
     ) -> Result<(), AdjustError> {
         let max_it = self.cfg.max_iterations;
-        {
-            {
-                // Cauchy re-weighting on a median scale: blunders lose their pull.
-                for _ in 0..self.cfg.max_robust_rounds {
-                    let (it, _) = self.least_squares(max_it.min(10))?;
-                    report.iterations += it;
-                    let change = self.cauchy_factors();
-                    report.robust_rounds += 1;
-                    if change < 0.01 {
-                        break;
-                    }
-                }
-                // Data snooping with full weights until the excluded set is stable.
-                for o in self.obs[..self.n_obs].iter_mut() {
-                    o.factor = 1.0;
-                }
-                self.snoop_rounds(critical, 0, false, report)?;
+        // Cauchy re-weighting on a median scale: blunders lose their pull.
+        for _ in 0..self.cfg.max_robust_rounds {
+            let (it, _) = self.least_squares(max_it.min(10))?;
+            report.iterations += it;
+            let change = self.cauchy_factors();
+            report.robust_rounds += 1;
+            if change < 0.01 {
+                break;
             }
         }
-        Ok(())
+        // Data snooping with full weights until the excluded set is stable.
+        for o in self.obs[..self.n_obs].iter_mut() {
+            o.factor = 1.0;
+        }
+        self.snoop_rounds(critical, 0, false, report)
     }
 
     /// Snooping from the current solution until the excluded set is stable, then
@@ -180,11 +175,11 @@ impl<'a> Window<'a> {
         report: &mut Report,
     ) -> Result<(), AdjustError> {
         let max_it = self.cfg.max_iterations;
-        if !fresh {
-            self.statistics();
+        if fresh {
+            self.flag_by_statistics(critical, first_round);
+        } else {
+            self.snoop(critical, first_round);
         }
-        let scale2 = self.median_scale();
-        self.apply_flags(critical, first_round, scale2);
         let mut stable = false;
         for round in first_round + 1..=first_round + self.cfg.max_robust_rounds {
             let (it, conv) = self.least_squares(max_it)?;
@@ -239,6 +234,11 @@ impl<'a> Window<'a> {
     /// the excluded set changed.
     pub(super) fn snoop(&mut self, critical: f64, round: usize) -> bool {
         self.statistics();
+        self.flag_by_statistics(critical, round)
+    }
+
+    /// [`Self::snoop`] on the statistics already in `residuals`.
+    fn flag_by_statistics(&mut self, critical: f64, round: usize) -> bool {
         let scale2 = self.median_scale();
         self.apply_flags(critical, round, scale2)
     }
