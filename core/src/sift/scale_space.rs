@@ -95,7 +95,12 @@ pub fn convolve(rows: &[&[i16]], taps: &[i32], radius: usize, acc: &mut [i32], o
         if simd::has_avx2() {
             start = unsafe { simd::convolve_avx2(rows, taps, radius, out, start) };
         }
-        unsafe { simd::convolve_sse2(rows, taps, radius, out, start) }
+        // Only when a block of eight is left: its setup alone costs about 340
+        // instructions, and the wide paths usually leave none (widths of 640, 320, ..).
+        if start + 8 <= w {
+            start = unsafe { simd::convolve_sse2(rows, taps, radius, out, start) };
+        }
+        start
     };
     #[cfg(not(target_arch = "x86_64"))]
     let done = 0;
@@ -204,8 +209,8 @@ mod simd {
         columns(taps, radius, KERNEL_BITS, out, start, load, sym)
     }
 
-    /// Columns `0..w - w % 8` of [`super::blur_column_u8`]: u8 rows, widened to i16
-    /// on load (`l + h` fits: at most 510), then [`columns`] shifted by 14 - 6.
+    /// Columns `start..w - w % 8` of [`super::blur_column_u8`]: u8 rows, widened to
+    /// i16 on load (`l + h` fits: at most 510), then [`columns`] shifted by 14 - 6.
     ///
     /// # Safety
     /// As [`convolve_sse2`]: `2 radius + 1` rows of at least `out.len()` values.
@@ -214,6 +219,7 @@ mod simd {
         taps: &[i32],
         radius: usize,
         out: &mut [i16],
+        start: usize,
     ) -> usize {
         let radius = radius.min(MAX_RADIUS);
         let t = tap_rows(rows, radius);
@@ -227,7 +233,7 @@ mod simd {
         let load = |c: usize| widen(t.centre, c);
         let sym =
             |j: usize, c: usize| unsafe { _mm_add_epi16(widen(t.lo[j], c), widen(t.hi[j], c)) };
-        columns(taps, radius, KERNEL_BITS - FRAC_BITS, out, 0, load, sym)
+        columns(taps, radius, KERNEL_BITS - FRAC_BITS, out, start, load, sym)
     }
 
     /// The symmetric kernel eight columns at a time from `start` (rounded up to 8):
@@ -300,12 +306,14 @@ mod simd {
     }
 
     /// One wide version of [`convolve_sse2`]'s arithmetic: `$lanes` columns per block
-    /// on the named register type and intrinsics. Unpacking works within 128-bit lanes:
+    /// on the named register type and intrinsics, rows of `$elem` widened to i16 by
+    /// `$load`, sums shifted by `$shift`. Unpacking works within 128-bit lanes:
     /// the low accumulator holds columns 0-3, 8-11, .. and the high one 4-7, 12-15, ..,
     /// and packing restores the order.
     macro_rules! wide_convolve {
-        ($(#[$doc:meta])* $name:ident, $feature:literal, $lanes:expr, $vec:ty,
-         $set1:ident, $setzero:ident, $loadu:ident, $storeu:ident, $add16:ident,
+        ($(#[$doc:meta])* $name:ident, $feature:literal, $lanes:expr, $vec:ty, $elem:ty,
+         $shift:expr, |$p:ident| $load:expr,
+         $set1:ident, $setzero:ident, $storeu:ident, $add16:ident,
          $add32:ident, $madd:ident, $lo:ident, $hi:ident, $srai:ident, $imm:ty, $packs:ident) => {
             $(#[$doc])*
             /// Returns the end of the columns written (from `start`, a multiple of the
@@ -316,7 +324,7 @@ mod simd {
             /// `out.len()` values.
             #[target_feature(enable = $feature)]
             pub unsafe fn $name(
-                rows: &[&[i16]],
+                rows: &[&[$elem]],
                 taps: &[i32],
                 radius: usize,
                 out: &mut [i16],
@@ -328,7 +336,7 @@ mod simd {
                 // SAFETY: loads and stores touch columns `c..c + $lanes` with
                 // `c + $lanes <= w`.
                 unsafe {
-                    let round = $set1(1 << (KERNEL_BITS - 1));
+                    let round = $set1(1 << ($shift - 1));
                     // Built in place, not by `tap_pairs` / `tap_rows`: returning their
                     // arrays costs about 200 instructions per row here (callgrind), and
                     // this runs once per row of every level.
@@ -349,12 +357,15 @@ mod simd {
                     let zero = $setzero();
                     // A macro, not a closure: closures do not inherit `target_feature`,
                     // and the intrinsics would become calls.
+                    macro_rules! load {
+                        ($ptr:expr) => {{
+                            let $p: *const $elem = $ptr;
+                            $load
+                        }};
+                    }
                     macro_rules! sym {
                         ($j:expr, $c:expr) => {
-                            $add16(
-                                $loadu(lp[$j].add($c) as *const $vec),
-                                $loadu(hp[$j].add($c) as *const $vec),
-                            )
+                            $add16(load!(lp[$j].add($c)), load!(hp[$j].add($c)))
                         };
                     }
                     let full = radius.div_ceil(2);
@@ -363,7 +374,7 @@ mod simd {
                     while b < blocks {
                         let c = b * $lanes;
                         b += 1;
-                        let x = $loadu(centre.add(c) as *const $vec);
+                        let x = load!(centre.add(c));
                         let s1 = if radius >= 1 { sym!(1, c) } else { zero };
                         let k = kv[0];
                         let mut a0 = $add32(round, $madd($lo(x, s1), k));
@@ -385,8 +396,8 @@ mod simd {
                             a0 = $add32(a0, $madd($lo(s0, zero), k));
                             a1 = $add32(a1, $madd($hi(s0, zero), k));
                         }
-                        a0 = $srai::<{ KERNEL_BITS as $imm }>(a0);
-                        a1 = $srai::<{ KERNEL_BITS as $imm }>(a1);
+                        a0 = $srai::<{ $shift as $imm }>(a0);
+                        a1 = $srai::<{ $shift as $imm }>(a1);
                         $storeu(out.as_mut_ptr().add(c) as *mut $vec, $packs(a0, a1));
                     }
                 }
@@ -397,16 +408,27 @@ mod simd {
 
     wide_convolve!(
         /// Sixteen columns at a time on 256-bit registers.
-        convolve_avx2, "avx2", 16, __m256i, _mm256_set1_epi32, _mm256_setzero_si256,
-        _mm256_loadu_si256, _mm256_storeu_si256, _mm256_add_epi16, _mm256_add_epi32,
+        convolve_avx2, "avx2", 16, __m256i, i16, KERNEL_BITS,
+        |p| _mm256_loadu_si256(p as *const __m256i),
+        _mm256_set1_epi32, _mm256_setzero_si256, _mm256_storeu_si256, _mm256_add_epi16, _mm256_add_epi32,
+        _mm256_madd_epi16, _mm256_unpacklo_epi16, _mm256_unpackhi_epi16,
+        _mm256_srai_epi32, i32, _mm256_packs_epi32
+    );
+
+    wide_convolve!(
+        /// [`column_u8_sse2`] sixteen columns at a time: u8 rows widened to i16 on load.
+        column_u8_avx2, "avx2", 16, __m256i, u8, KERNEL_BITS - FRAC_BITS,
+        |p| _mm256_cvtepu8_epi16(_mm_loadu_si128(p as *const __m128i)),
+        _mm256_set1_epi32, _mm256_setzero_si256, _mm256_storeu_si256, _mm256_add_epi16, _mm256_add_epi32,
         _mm256_madd_epi16, _mm256_unpacklo_epi16, _mm256_unpackhi_epi16,
         _mm256_srai_epi32, i32, _mm256_packs_epi32
     );
 
     wide_convolve!(
         /// Thirty-two columns at a time on 512-bit registers.
-        convolve_avx512, "avx512bw", 32, __m512i, _mm512_set1_epi32, _mm512_setzero_si512,
-        _mm512_loadu_si512, _mm512_storeu_si512, _mm512_add_epi16, _mm512_add_epi32,
+        convolve_avx512, "avx512bw", 32, __m512i, i16, KERNEL_BITS,
+        |p| _mm512_loadu_si512(p as *const __m512i),
+        _mm512_set1_epi32, _mm512_setzero_si512, _mm512_storeu_si512, _mm512_add_epi16, _mm512_add_epi32,
         _mm512_madd_epi16, _mm512_unpacklo_epi16, _mm512_unpackhi_epi16,
         _mm512_srai_epi32, u32, _mm512_packs_epi32
     );
@@ -447,8 +469,20 @@ pub fn blur_column_u8<'r>(
         return;
     }
     #[cfg(target_arch = "x86_64")]
-    // SAFETY: `2 radius + 1` rows, each of at least `w` values (checked above).
-    let done = unsafe { simd::column_u8_sse2(list, taps, radius, &mut out[..w]) };
+    let done = {
+        // SAFETY (both): the CPU has the feature (checked at run time; SSE2 is the
+        // x86_64 baseline); `2 radius + 1` rows, each of at least `w` values (checked
+        // above).
+        let out = &mut out[..w];
+        let mut start = 0;
+        if simd::has_avx2() {
+            start = unsafe { simd::column_u8_avx2(list, taps, radius, out, start) };
+        }
+        if start + 8 <= w {
+            start = unsafe { simd::column_u8_sse2(list, taps, radius, out, start) };
+        }
+        start
+    };
     #[cfg(not(target_arch = "x86_64"))]
     let done = 0;
     // Q14 taps times 2^6 fractional bits: shift by 14 - 6.
