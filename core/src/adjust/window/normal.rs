@@ -291,12 +291,18 @@ impl<'a> Window<'a> {
         )
     }
 
-    /// Builds and solves the damped system and applies the step; on a
-    /// singular system returns the slot of the undetermined epoch.
-    pub(super) fn step(&mut self, lambda: f64) -> Result<(), usize> {
+    /// Builds and solves the damped system and applies the step. Returns the cost
+    /// of the state the system was built at (as [`Self::build`]) and, on a singular
+    /// system, the slot of the undetermined epoch.
+    pub(super) fn step(&mut self, lambda: f64) -> (f64, Result<(), usize>) {
+        let cost = self.build(lambda);
+        (cost, self.solve_and_apply(lambda))
+    }
+
+    /// Solves the system [`Self::build`] left and applies the step.
+    fn solve_and_apply(&mut self, lambda: f64) -> Result<(), usize> {
         let nc = self.n_cam();
         let rig_block = self.rig_block();
-        self.build(lambda);
         self.hold_blocks();
         for i in 0..nc {
             self.reduced[i * nc + i] *= 1.0 + lambda;
@@ -330,18 +336,31 @@ impl<'a> Window<'a> {
 
     /// The reduced camera system `S dc = rhs` (lower triangle, undamped
     /// camera diagonal, points damped by `lambda`) into `reduced` and `rhs`.
-    pub(super) fn build(&mut self, lambda: f64) {
+    ///
+    /// Decides which points take part (two rays or more, not at infinity) and
+    /// returns the cost (`vTPv`, constraints included) of that set at the current
+    /// state: the cost an iteration sequence starts from, so that costs compare
+    /// like with like. Its sum runs point by point; [`Self::cost`]'s, observation by
+    /// observation, rounds differently.
+    pub(super) fn build(&mut self, lambda: f64) -> f64 {
         self.refresh_rotations();
         let nc = self.n_cam();
         let (rig_block, interior_block) = self.built_blocks();
         self.reduced[..nc * nc].fill(0.0);
         self.rhs[..nc].fill(0.0);
+        let mut cost = 0.0;
         for p in 0..self.n_point_slots {
             if self.points[p].flags & PT_USED == 0 {
                 continue;
             }
-            let (pb, _, _) = self.point_blocks(p, CamBlocks::Full);
-            let Some(vinv) = self.usable_point(p, &pb, lambda) else {
+            let (pb, point_cost, _) = self.point_blocks(p, CamBlocks::Full);
+            let vinv = self.usable_point(p, &pb, lambda);
+            // Excluded or not does not depend on the damping; the damped inverse
+            // alone may still fail.
+            if self.points[p].flags & PT_EXCLUDED == 0 {
+                cost += point_cost;
+            }
+            let Some(vinv) = vinv else {
                 continue;
             };
             for ti in 0..pb.touched {
@@ -394,7 +413,7 @@ impl<'a> Window<'a> {
                 }
             }
         }
-        self.add_constraints(true);
+        cost + self.add_constraints(true).0
     }
 
     /// Point steps `dp = V^-1 (b_p - W^T dc)` with the camera step in `rhs`, applied.
@@ -421,27 +440,6 @@ impl<'a> Window<'a> {
                 self.points[p].xyz[i] += dp[i];
             }
         }
-    }
-
-    /// Decides which points take part (two rays or more, not at infinity)
-    /// before an iteration sequence, so costs compare like with like. Returns the
-    /// cost of that set, as [`Self::cost`] would: the pass has projected every
-    /// observation already.
-    pub(super) fn classify_points(&mut self) -> f64 {
-        self.refresh_rotations();
-        let mut cost = 0.0;
-        for p in 0..self.n_point_slots {
-            if self.points[p].flags & PT_USED == 0 {
-                continue;
-            }
-            self.points[p].flags &= !PT_EXCLUDED;
-            let (pb, point_cost, _) = self.point_blocks(p, CamBlocks::None);
-            let _ = self.usable_point(p, &pb, 0.0);
-            if self.points[p].flags & PT_EXCLUDED == 0 {
-                cost += point_cost;
-            }
-        }
-        cost + self.add_constraints(false).0
     }
 
     /// Damped inverse of a point's `V`, or `None` (point excluded) when it has

@@ -18,14 +18,18 @@ impl<'a> Window<'a> {
     /// Levenberg-Marquardt to convergence with the current weight factors.
     /// Returns (iterations, converged).
     pub(super) fn least_squares(&mut self, max_iter: usize) -> Result<(usize, bool), AdjustError> {
-        let mut cost = self.classify_points();
+        // The cost of the current state: the first system built gives the starting
+        // state's, each accepted step's evaluation the next.
+        let mut current = None;
         let mut lambda = 1e-6;
         let mut iterations = 0;
         let mut converged = false;
         while iterations < max_iter {
             iterations += 1;
             self.save();
-            match self.step(lambda) {
+            let (built_at, outcome) = self.step(lambda);
+            let cost = *current.get_or_insert(built_at);
+            match outcome {
                 Ok(()) => {}
                 Err(slot) => {
                     self.restore();
@@ -41,9 +45,9 @@ impl<'a> Window<'a> {
             let (new_cost, _) = self.cost();
             if new_cost.is_finite() && new_cost <= cost {
                 let decrease = cost - new_cost;
-                cost = new_cost;
+                current = Some(new_cost);
                 lambda = (lambda * 0.1).max(1e-12);
-                if small_step || decrease <= self.cfg.tolerance * cost.max(1e-300) {
+                if small_step || decrease <= self.cfg.tolerance * new_cost.max(1e-300) {
                     converged = true;
                     break;
                 }

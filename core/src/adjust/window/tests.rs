@@ -180,10 +180,9 @@ fn schur_step_zeroes_the_numerical_gradient() {
     let (mut w, _) = load(&s, cfg, &mut arena, 72);
     w.set_gnss(2, s.poses[2].centre, 0.05).unwrap();
     w.build_index();
-    let _ = w.classify_points();
     // Start close to the optimum so one step is (nearly) the whole way.
     for _ in 0..3 {
-        w.step(0.0).unwrap();
+        w.step(0.0).1.unwrap();
     }
     for e in 1..3 {
         w.epochs[e].params[0] += 2e-4;
@@ -216,7 +215,7 @@ fn schur_step_zeroes_the_numerical_gradient() {
     };
     let grad_norm = |w: &mut Window| numerical_gradient_norm(w, n, bump);
     let before = grad_norm(&mut w);
-    w.step(0.0).unwrap();
+    w.step(0.0).1.unwrap();
     let after = grad_norm(&mut w);
     assert!(after < 1e-3 * before, "gradient {before} -> {after}");
 }
@@ -331,4 +330,41 @@ fn snooping_from_the_statistics_of_detection_is_snooping_from_fresh_ones() {
     let n = flags.iter().filter(|&&f| f).count();
     assert!(n >= blunders, "{n} flagged, {blunders} blunders");
     assert_eq!((poses, flags), snooped(false));
+}
+
+/// The cost a build returns, where an iteration sequence starts, is the window's
+/// cost at that state over the points that take part: a point left with a single
+/// ray counts in neither.
+#[test]
+fn build_returns_the_cost_of_the_points_it_takes() {
+    use crate::adjust::tests::{arena_for, load, scene};
+    let s = scene(11, 6, 300, 0.0);
+    let cfg = AdjustConfig {
+        window: 6,
+        max_points: 300,
+        max_observations: s.observations.len(),
+        ..AdjustConfig::default()
+    };
+    let mut mem = arena_for(&cfg);
+    let mut arena = Arena::new(&mut mem);
+    let (mut w, ids) = load(&s, cfg, &mut arena, 3);
+    let lone = ids[0];
+    let rays = w.obs[..w.n_obs].iter().filter(|o| o.point == lone).count();
+    assert!(rays >= 2, "point 0 has {rays} rays");
+    for o in w.obs[..w.n_obs]
+        .iter_mut()
+        .filter(|o| o.point == lone)
+        .skip(1)
+    {
+        o.factor = 0.0;
+    }
+    w.build_index();
+    let built = w.build(1e-3);
+    assert_ne!(w.points[lone as usize].flags & PT_EXCLUDED, 0);
+    let (cost, _) = w.cost();
+    assert!(cost > 0.0);
+    assert!(
+        (built - cost).abs() <= 1e-12 * cost,
+        "built {built}, cost {cost}"
+    );
 }
