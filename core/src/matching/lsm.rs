@@ -159,6 +159,10 @@ pub fn shift_step(
     for (u, x) in pu[..n].iter_mut().enumerate() {
         *x = u as f32 - hf;
     }
+    // The groups of LANES samples the template reaches. Past it the columns hold +0.0
+    // only, and adding +0.0 changes a float sum only if it is -0.0, which these sums,
+    // begun at +0.0, never are (-0.0 is only ever -0.0 + -0.0): those groups are skipped.
+    let width = n.div_ceil(LANES) * LANES;
     let mut acc = [[0f32; LANES]; SUMS];
     for v in 0..n {
         let pv = v as f32 - hf;
@@ -183,7 +187,7 @@ pub fn shift_step(
             cols[RES][u] = zt[v * n + u] - model;
         }
         let mut line = [[0f32; LANES]; 4];
-        sum_row(&cols, &mut acc, &mut line);
+        sum_row(&cols, width, &mut acc, &mut line);
         // The sums with the column of ones, and with v (the same along the row).
         for (k, x) in line.iter().enumerate() {
             for l in 0..LANES {
@@ -247,18 +251,20 @@ const PAIRS: [(usize, usize); 13] = [
     (U, RES),
 ];
 
-/// A row's products into the partial sums `acc[k]` ([`PAIRS`]) and the plain sums of
-/// a, b, i and r into `line`, [`LANES`] samples at a time.
+/// The groups of [`LANES`] samples that start below `width` (at most [`ROW`]): their
+/// products into the partial sums `acc[k]` ([`PAIRS`]) and the plain sums of a, b, i
+/// and r into `line`, [`LANES`] samples at a time.
 #[inline]
 pub(super) fn sum_row(
     cols: &[[f32; ROW]; 5],
+    width: usize,
     acc: &mut [[f32; LANES]; SUMS],
     line: &mut [[f32; LANES]; 4],
 ) {
     #[cfg(target_arch = "x86_64")]
-    return sse::sum_row(cols, acc, line);
+    return sse::sum_row(cols, width, acc, line);
     #[allow(unreachable_code)]
-    sum_row_scalar(cols, acc, line)
+    sum_row_scalar(cols, width, acc, line)
 }
 
 /// The definition of [`sum_row`], and the kernel of targets without SSE: lane `l` of
@@ -267,10 +273,11 @@ pub(super) fn sum_row(
 #[cfg_attr(target_arch = "x86_64", allow(dead_code))]
 pub(super) fn sum_row_scalar(
     cols: &[[f32; ROW]; 5],
+    width: usize,
     acc: &mut [[f32; LANES]; SUMS],
     line: &mut [[f32; LANES]; 4],
 ) {
-    for c in (0..ROW).step_by(LANES) {
+    for c in (0..width.min(ROW)).step_by(LANES) {
         for l in 0..LANES {
             for (s, &(x, y)) in acc.iter_mut().zip(&PAIRS) {
                 s[l] += cols[x][c + l] * cols[y][c + l];
@@ -293,15 +300,33 @@ pub(super) mod sse {
     #[inline]
     pub fn sum_row(
         cols: &[[f32; ROW]; 5],
+        width: usize,
+        acc: &mut [[f32; LANES]; SUMS],
+        line: &mut [[f32; LANES]; 4],
+    ) {
+        // A constant count of groups, so that the loop unrolls as over the whole row.
+        match width.div_ceil(LANES) {
+            0 => {}
+            1 => groups::<1>(cols, acc, line),
+            2 => groups::<2>(cols, acc, line),
+            3 => groups::<3>(cols, acc, line),
+            _ => groups::<{ ROW / LANES }>(cols, acc, line),
+        }
+    }
+
+    #[inline(always)]
+    fn groups<const G: usize>(
+        cols: &[[f32; ROW]; 5],
         acc: &mut [[f32; LANES]; SUMS],
         line: &mut [[f32; LANES]; 4],
     ) {
         // SAFETY: SSE is part of the x86_64 baseline; every load and store reads or
-        // writes LANES = 4 floats inside an array (ROW is a multiple of LANES).
+        // writes LANES = 4 floats inside an array (ROW is a multiple of LANES, and the
+        // groups start below ROW).
         unsafe {
             let mut s: [__m128; 13] = core::array::from_fn(|k| _mm_loadu_ps(acc[k].as_ptr()));
             let mut t: [__m128; 4] = core::array::from_fn(|k| _mm_loadu_ps(line[k].as_ptr()));
-            for c in (0..ROW).step_by(LANES) {
+            for c in (0..(G * LANES).min(ROW)).step_by(LANES) {
                 let x: [__m128; 5] =
                     core::array::from_fn(|k| _mm_loadu_ps(cols[k].as_ptr().add(c)));
                 for (s, &(p, q)) in s.iter_mut().zip(&PAIRS) {

@@ -164,17 +164,57 @@ fn least_squares_sums_on_sse_are_the_scalar_sums() {
         let cols: [[f32; ROW]; 5] = core::array::from_fn(|_| core::array::from_fn(|_| next()));
         let start: [[f32; LANES]; SUMS] =
             core::array::from_fn(|_| core::array::from_fn(|_| next()));
-        let (mut acc, mut line) = (start, [[1.5f32; LANES]; 4]);
-        let (mut acc_s, mut line_s) = (start, [[1.5f32; LANES]; 4]);
-        sum_row(&cols, &mut acc, &mut line);
-        sum_row_scalar(&cols, &mut acc_s, &mut line_s);
+        for width in (LANES..=ROW).step_by(LANES) {
+            let (mut acc, mut line) = (start, [[1.5f32; LANES]; 4]);
+            let (mut acc_s, mut line_s) = (start, [[1.5f32; LANES]; 4]);
+            sum_row(&cols, width, &mut acc, &mut line);
+            sum_row_scalar(&cols, width, &mut acc_s, &mut line_s);
+            assert_eq!(
+                acc.map(|a| a.map(f32::to_bits)),
+                acc_s.map(|a| a.map(f32::to_bits))
+            );
+            assert_eq!(
+                line.map(|a| a.map(f32::to_bits)),
+                line_s.map(|a| a.map(f32::to_bits))
+            );
+        }
+    }
+}
+
+/// Summing only the groups a template reaches gives the sums of the whole row to the
+/// bit when the samples past it are zero: the zeros change no sum.
+#[test]
+fn least_squares_sums_skip_the_zeros_past_the_template() {
+    use super::super::lsm::{sum_row, LANES, ROW, SUMS};
+    let mut state = 777u32;
+    let mut next = || {
+        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        (state >> 8) as f32 / (1u32 << 24) as f32 * 200.0 - 100.0
+    };
+    for n in 1..=ROW {
+        let mut cols = [[0f32; ROW]; 5];
+        for col in cols.iter_mut() {
+            for x in col[..n].iter_mut() {
+                *x = next();
+            }
+        }
+        // Zeros of both signs inside the template, as the columns can hold.
+        cols[0][0] = -0.0;
+        cols[3][n - 1] = 0.0;
+        let width = n.div_ceil(LANES) * LANES;
+        let (mut part, mut part_line) = ([[0f32; LANES]; SUMS], [[0f32; LANES]; 4]);
+        let (mut whole, mut whole_line) = ([[0f32; LANES]; SUMS], [[0f32; LANES]; 4]);
+        sum_row(&cols, width, &mut part, &mut part_line);
+        sum_row(&cols, ROW, &mut whole, &mut whole_line);
         assert_eq!(
-            acc.map(|a| a.map(f32::to_bits)),
-            acc_s.map(|a| a.map(f32::to_bits))
+            part.map(|a| a.map(f32::to_bits)),
+            whole.map(|a| a.map(f32::to_bits)),
+            "n {n}"
         );
         assert_eq!(
-            line.map(|a| a.map(f32::to_bits)),
-            line_s.map(|a| a.map(f32::to_bits))
+            part_line.map(|a| a.map(f32::to_bits)),
+            whole_line.map(|a| a.map(f32::to_bits)),
+            "n {n}"
         );
     }
 }
