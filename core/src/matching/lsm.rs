@@ -304,7 +304,9 @@ pub(super) mod sse {
         acc: &mut [[f32; LANES]; SUMS],
         line: &mut [[f32; LANES]; 4],
     ) {
-        // A constant count of groups, so that the loop unrolls as over the whole row.
+        // A constant count of groups, so that the loop unrolls as over the whole row
+        // (to a run-time bound it cost more than the skipped groups saved). Any count
+        // past three takes the whole row: the groups past the template add nothing.
         match width.div_ceil(LANES) {
             0 => {}
             1 => groups::<1>(cols, acc, line),
@@ -314,6 +316,7 @@ pub(super) mod sse {
         }
     }
 
+    /// [`sum_row`] over the first `G` groups of the row (at most the row's).
     #[inline(always)]
     fn groups<const G: usize>(
         cols: &[[f32; ROW]; 5],
