@@ -149,17 +149,22 @@ fn least_squares_refuses_an_edge_and_a_flat_patch() {
     );
 }
 
+/// Pseudo-random values in -100..100 from `seed` (a linear congruential sequence).
+fn values(seed: u32) -> impl FnMut() -> f32 {
+    let mut state = seed;
+    move || {
+        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        (state >> 8) as f32 / (1u32 << 24) as f32 * 200.0 - 100.0
+    }
+}
+
 /// The SSE kernel of the normal equations' sums gives the scalar definition's sums to
 /// the bit (the same products, summed lane by lane in the same order), so a target
 /// without SSE matches as the host does.
 #[test]
 fn least_squares_sums_on_sse_are_the_scalar_sums() {
     use super::super::lsm::{sum_row, sum_row_scalar, LANES, ROW, SUMS};
-    let mut state = 12345u32;
-    let mut next = || {
-        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-        (state >> 8) as f32 / (1u32 << 24) as f32 * 200.0 - 100.0
-    };
+    let mut next = values(12345);
     for _ in 0..50 {
         let cols: [[f32; ROW]; 5] = core::array::from_fn(|_| core::array::from_fn(|_| next()));
         let start: [[f32; LANES]; SUMS] =
@@ -186,11 +191,7 @@ fn least_squares_sums_on_sse_are_the_scalar_sums() {
 #[test]
 fn least_squares_sums_skip_the_zeros_past_the_template() {
     use super::super::lsm::{sum_row, LANES, ROW, SUMS};
-    let mut state = 777u32;
-    let mut next = || {
-        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-        (state >> 8) as f32 / (1u32 << 24) as f32 * 200.0 - 100.0
-    };
+    let mut next = values(777);
     for n in 1..=ROW {
         let mut cols = [[0f32; ROW]; 5];
         for col in cols.iter_mut() {
