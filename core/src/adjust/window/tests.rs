@@ -291,6 +291,16 @@ fn gnss_lever_arm_jacobian_matches_numeric() {
     }
 }
 
+/// Defaults with room for the whole of the six-epoch, 300-point drive `s` in one window.
+fn whole_drive(s: &crate::adjust::tests::Scene) -> AdjustConfig {
+    AdjustConfig {
+        window: 6,
+        max_points: 300,
+        max_observations: s.observations.len(),
+        ..AdjustConfig::default()
+    }
+}
+
 /// Snooping's first round after detection reads the statistics detection computed
 /// for the same solution instead of computing them again: on a window with 2 %
 /// blunders and a pessimistic a-priori sigma (the global test passes, as on the
@@ -302,12 +312,9 @@ fn snooping_from_the_statistics_of_detection_is_snooping_from_fresh_ones() {
     use crate::adjust::tests::{arena_for, load_weighted, scene};
     let s = scene(11, 6, 300, 0.02);
     let cfg = AdjustConfig {
-        window: 6,
-        max_points: 300,
-        max_observations: s.observations.len(),
         max_robust_rounds: 1,
         keep_exclusions: true,
-        ..AdjustConfig::default()
+        ..whole_drive(&s)
     };
     let Robust::Snooping { critical } = cfg.robust else {
         panic!("the default is snooping");
@@ -339,12 +346,7 @@ fn snooping_from_the_statistics_of_detection_is_snooping_from_fresh_ones() {
 fn build_returns_the_cost_of_the_points_it_takes() {
     use crate::adjust::tests::{arena_for, load, scene};
     let s = scene(11, 6, 300, 0.0);
-    let cfg = AdjustConfig {
-        window: 6,
-        max_points: 300,
-        max_observations: s.observations.len(),
-        ..AdjustConfig::default()
-    };
+    let cfg = whole_drive(&s);
     let mut mem = arena_for(&cfg);
     let mut arena = Arena::new(&mut mem);
     let (mut w, ids) = load(&s, cfg, &mut arena, 3);
