@@ -159,10 +159,6 @@ pub fn shift_step(
     for (u, x) in pu[..n].iter_mut().enumerate() {
         *x = u as f32 - hf;
     }
-    // The groups of LANES samples the template reaches. Past it the columns hold +0.0
-    // only, and adding +0.0 changes a float sum only if it is -0.0, which these sums,
-    // begun at +0.0, never are (-0.0 is only ever -0.0 + -0.0): those groups are skipped.
-    let width = n.div_ceil(LANES) * LANES;
     let mut acc = [[0f32; LANES]; SUMS];
     for v in 0..n {
         let pv = v as f32 - hf;
@@ -187,7 +183,7 @@ pub fn shift_step(
             cols[RES][u] = zt[v * n + u] - model;
         }
         let mut line = [[0f32; LANES]; 4];
-        sum_row(&cols, width, &mut acc, &mut line);
+        sum_row(&cols, n, &mut acc, &mut line);
         // The sums with the column of ones, and with v (the same along the row).
         for (k, x) in line.iter().enumerate() {
             for l in 0..LANES {
@@ -251,20 +247,24 @@ const PAIRS: [(usize, usize); 13] = [
     (U, RES),
 ];
 
-/// The groups of [`LANES`] samples that start below `width` (at most [`ROW`]): their
-/// products into the partial sums `acc[k]` ([`PAIRS`]) and the plain sums of a, b, i
-/// and r into `line`, [`LANES`] samples at a time.
+/// The groups of [`LANES`] samples that start below `n`, the template's width (at
+/// most [`ROW`]): their products into the partial sums `acc[k]` ([`PAIRS`]) and the
+/// plain sums of a, b, i and r into `line`, [`LANES`] samples at a time.
+///
+/// Past the template the columns hold +0.0 only, and adding +0.0 changes a float sum
+/// only if it is -0.0, which these sums, begun at +0.0, never are (-0.0 is only ever
+/// -0.0 + -0.0): the groups there are skipped.
 #[inline]
 pub(super) fn sum_row(
     cols: &[[f32; ROW]; 5],
-    width: usize,
+    n: usize,
     acc: &mut [[f32; LANES]; SUMS],
     line: &mut [[f32; LANES]; 4],
 ) {
     #[cfg(target_arch = "x86_64")]
-    return sse::sum_row(cols, width, acc, line);
+    return sse::sum_row(cols, n, acc, line);
     #[allow(unreachable_code)]
-    sum_row_scalar(cols, width, acc, line)
+    sum_row_scalar(cols, n, acc, line)
 }
 
 /// The definition of [`sum_row`], and the kernel of targets without SSE: lane `l` of
@@ -273,11 +273,11 @@ pub(super) fn sum_row(
 #[cfg_attr(target_arch = "x86_64", allow(dead_code))]
 pub(super) fn sum_row_scalar(
     cols: &[[f32; ROW]; 5],
-    width: usize,
+    n: usize,
     acc: &mut [[f32; LANES]; SUMS],
     line: &mut [[f32; LANES]; 4],
 ) {
-    for c in (0..width.min(ROW)).step_by(LANES) {
+    for c in (0..n.min(ROW)).step_by(LANES) {
         for l in 0..LANES {
             for (s, &(x, y)) in acc.iter_mut().zip(&PAIRS) {
                 s[l] += cols[x][c + l] * cols[y][c + l];
@@ -300,14 +300,14 @@ pub(super) mod sse {
     #[inline]
     pub fn sum_row(
         cols: &[[f32; ROW]; 5],
-        width: usize,
+        n: usize,
         acc: &mut [[f32; LANES]; SUMS],
         line: &mut [[f32; LANES]; 4],
     ) {
         // A constant count of groups, so that the loop unrolls as over the whole row
         // (to a run-time bound it cost more than the skipped groups saved). Any count
         // past three takes the whole row: the groups past the template add nothing.
-        match width.div_ceil(LANES) {
+        match n.div_ceil(LANES) {
             0 => {}
             1 => groups::<1>(cols, acc, line),
             2 => groups::<2>(cols, acc, line),

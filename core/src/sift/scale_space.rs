@@ -95,12 +95,9 @@ pub fn convolve(rows: &[&[i16]], taps: &[i32], radius: usize, acc: &mut [i32], o
         if simd::has_avx2() {
             start = unsafe { simd::convolve_avx2(rows, taps, radius, out, start) };
         }
-        // Only when a block of eight is left: its setup alone costs about 340
-        // instructions, and the wide paths usually leave none (widths of 640, 320, ..).
-        if start + 8 <= w {
-            start = unsafe { simd::convolve_sse2(rows, taps, radius, out, start) };
-        }
-        start
+        simd::last_block(w, start, |start| unsafe {
+            simd::convolve_sse2(rows, taps, radius, out, start)
+        })
     };
     #[cfg(not(target_arch = "x86_64"))]
     let done = 0;
@@ -305,6 +302,19 @@ mod simd {
         avx512_cpuid::get()
     }
 
+    /// Runs `sse2` (an eight-column kernel) from `start` when the wide kernels left a
+    /// block of eight of the `w` columns, and returns the end of the columns written.
+    /// Only then: its setup alone costs about 340 instructions per row, and the wide
+    /// kernels usually leave none (widths of 640, 320, ..).
+    #[inline(always)]
+    pub fn last_block(w: usize, start: usize, sse2: impl FnOnce(usize) -> usize) -> usize {
+        if start + 8 <= w {
+            sse2(start)
+        } else {
+            start
+        }
+    }
+
     /// One wide version of [`convolve_sse2`]'s arithmetic: `$lanes` columns per block
     /// on the named register type and intrinsics, rows of `$elem` widened to i16 by
     /// `$load`, sums shifted by `$shift`. Unpacking works within 128-bit lanes:
@@ -478,10 +488,9 @@ pub fn blur_column_u8<'r>(
         if simd::has_avx2() {
             start = unsafe { simd::column_u8_avx2(list, taps, radius, out, start) };
         }
-        if start + 8 <= w {
-            start = unsafe { simd::column_u8_sse2(list, taps, radius, out, start) };
-        }
-        start
+        simd::last_block(w, start, |start| unsafe {
+            simd::column_u8_sse2(list, taps, radius, out, start)
+        })
     };
     #[cfg(not(target_arch = "x86_64"))]
     let done = 0;

@@ -169,11 +169,11 @@ fn least_squares_sums_on_sse_are_the_scalar_sums() {
         let cols: [[f32; ROW]; 5] = core::array::from_fn(|_| core::array::from_fn(|_| next()));
         let start: [[f32; LANES]; SUMS] =
             core::array::from_fn(|_| core::array::from_fn(|_| next()));
-        for width in (LANES..=ROW).step_by(LANES) {
+        for n in (LANES..=ROW).step_by(LANES) {
             let (mut acc, mut line) = (start, [[1.5f32; LANES]; 4]);
             let (mut acc_s, mut line_s) = (start, [[1.5f32; LANES]; 4]);
-            sum_row(&cols, width, &mut acc, &mut line);
-            sum_row_scalar(&cols, width, &mut acc_s, &mut line_s);
+            sum_row(&cols, n, &mut acc, &mut line);
+            sum_row_scalar(&cols, n, &mut acc_s, &mut line_s);
             assert_eq!(
                 acc.map(|a| a.map(f32::to_bits)),
                 acc_s.map(|a| a.map(f32::to_bits))
@@ -202,10 +202,9 @@ fn least_squares_sums_skip_the_zeros_past_the_template() {
         // Zeros of both signs inside the template, as the columns can hold.
         cols[0][0] = -0.0;
         cols[3][n - 1] = 0.0;
-        let width = n.div_ceil(LANES) * LANES;
         let (mut part, mut part_line) = ([[0f32; LANES]; SUMS], [[0f32; LANES]; 4]);
         let (mut whole, mut whole_line) = ([[0f32; LANES]; SUMS], [[0f32; LANES]; 4]);
-        sum_row(&cols, width, &mut part, &mut part_line);
+        sum_row(&cols, n, &mut part, &mut part_line);
         sum_row(&cols, ROW, &mut whole, &mut whole_line);
         assert_eq!(
             part.map(|a| a.map(f32::to_bits)),
