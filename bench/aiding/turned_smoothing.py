@@ -1,11 +1,13 @@
 #!/usr/bin/env python3
-"""An outage's misclosure spread by a rotation and a scale of its steps, against the
-smoothing `run` does: a measurement, not the product's model.
+"""An outage's misclosure spread by a rotation and a scale of its steps, re-solved from a
+run's report.json with the model's sigmas as options: the model `run` smooths with since
+the main after 5f50bf5 (`host/src/smoothing.rs`, a Kalman and Rauch-Tung-Striebel pass),
+here as one sparse least-squares problem, to try other sigmas without running again. Until
+then `run` smoothed per coordinate, each step's variance inside a stretch without fixes grown
+by what the firmware's own variance of the centre grew by; this script chose the model
+against that one.
 
-`run` smooths the left centres per coordinate over all the fixes (`host/src/smoothing.rs`):
-the steps of the images are a random walk, and inside a stretch without fixes each step's
-variance grows by what the firmware's own variance of the centre grew by. This script
-solves the same fixes and steps (`step_m` of report.json) jointly over the three
+It solves the fixes and steps (`step_m` of report.json) jointly over the three
 coordinates, with, for the epochs inside the outage, a small rotation `t` (3 angles) and a
 scale `l` of the steps as unknowns, each a random walk from the outage's first epoch:
 
@@ -19,9 +21,9 @@ Each fix observes its epoch's centre with its sigma (the antenna less its offset
 centre, which report.json's residuals give). Sparse least squares (scipy).
 
 Prints the largest position error inside the outage for the run's positions (`run`'s
-smoothing) and for this model, and, with an images-only run, whether each meets the two
-bars of `outage.py` (at most 0.2 m, and no larger than the images alone re-anchored to the
-truth at the outage's first epoch).
+smoothing) and for this model with the given sigmas, and, with an images-only run, whether
+each meets the two bars of `outage.py` (at most 0.2 m, and no larger than the images alone
+re-anchored to the truth at the outage's first epoch). The defaults are `run`'s sigmas.
 
 usage: turned_smoothing.py AIDED_DIR START_S END_S [--images IMAGES_ONLY_DIR]
        [--step-sd M] [--turn-sd RAD] [--turn-walk RAD] [--scale-sd S] [--scale-walk S]
@@ -118,9 +120,9 @@ def main():
     p.add_argument("--images", help="images-only run of the same dataset, for the bars")
     p.add_argument("--step-sd", type=float, default=3.7e-3, help="m (run's estimate: 3.7 to 3.9 mm)")
     p.add_argument("--turn-sd", type=float, default=1.5e-3, help="rad, at the outage's entry")
-    p.add_argument("--turn-walk", type=float, default=1e-4, help="rad per step")
+    p.add_argument("--turn-walk", type=float, default=2e-3, help="rad per step")
     p.add_argument("--scale-sd", type=float, default=1e-3, help="at the outage's entry")
-    p.add_argument("--scale-walk", type=float, default=1e-5, help="per step")
+    p.add_argument("--scale-walk", type=float, default=1e-4, help="per step")
     args = p.parse_args()
     epochs, truth = outage.load(args.aided)
     inside = [i for i, e in enumerate(epochs) if args.start_s <= e["time"] <= args.end_s]

@@ -8,31 +8,36 @@
 //! spread over the stretch without them, and where fixes are dense each position
 //! averages the neighbouring fixes through the images' steps.
 //!
-//! The model, per coordinate (X, Y, Z independently): the left perspective centres
-//! `C_k` are the unknowns. Each step `C_k - C_{k-1}` is observed by the images (the
-//! firmware's `step_m`: both centres from one window adjustment, so the fixes, which
-//! move the window as a whole, do not distort it) with variance `q + D_k`. `q` is the
-//! images' white step noise. `D_k`, into an epoch without a fix, is the growth of the
-//! firmware's own variance of the centre (with respect to the datum) since the
-//! previous epoch: the firmware propagates the attitude's uncertainty into the
-//! position along the path, which independent steps would not, so an outage's
-//! misclosure is spread the way the firmware expects the drift to grow, not in
-//! proportion to the distance alone (Bowditch's rule). Each fix observes its epoch's
-//! centre (the antenna position less the lever arm turned by the epoch's attitude)
-//! with its sigma. A step the firmware did not give (an epoch that was not adjusted,
-//! or after one) is taken from the two output positions with
-//! [`FALLBACK_VARIANCE_FACTOR`] times `q`.
+//! The model: the left perspective centres `C_k` are the unknowns. Each step
+//! `C_k - C_{k-1}` is observed by the images (the firmware's `step_m`: both centres from
+//! one window adjustment, so the fixes, which move the window as a whole, do not distort
+//! it) with the white variance `q` per coordinate. Each fix observes its epoch's centre
+//! (the antenna position less the lever arm turned by the epoch's attitude) with its
+//! sigma. A step the firmware did not give (an epoch that was not adjusted, or after one)
+//! is taken from the two output positions with [`FALLBACK_VARIANCE_FACTOR`] times `q`.
 //!
-//! Least squares over this chain is the fixed-interval (Rauch-Tung-Striebel) smoother
-//! of a random walk, O(n) with the smoothed variances, whose square roots replace the
-//! firmware's standard deviations of the centres; the attitudes are not changed. The right
-//! cameras follow through the rig, their standard deviations from the left camera's. `q`
-//! is estimated from the data by variance component estimation (Förstner's iteration
-//! `q <- q * sum(v^2 / q) / r`, `r` the redundancy numbers of the steps without `D`),
-//! since the images' step precision depends on the scene and the rig; the fixes'
-//! sigmas are taken as given.
+//! Into an epoch without a fix, the step is also turned and scaled: `s + s x t_k + l_k s`,
+//! with a small rotation `t` and a scale `l` of the images' steps as unknowns, which start
+//! at each stretch without fixes with the priors [`TURN_SD_RAD`] and [`SCALE_SD`] and walk
+//! by [`TURN_WALK_RAD`] and [`SCALE_WALK`] per step. Why: inside an outage the images'
+//! position error is their attitude's and scale's error carried along the path, so where
+//! the fixes return the misclosure is spread along the path's shape (a turn inside the
+//! outage included), not coordinate by coordinate. On 63 outages of sixteen rendered
+//! drives it met both bars of the outage on 54, against 49 for a chain per coordinate
+//! whose step variance grew with the firmware's own variance of the centre
+//! (`bench/aiding/README.md`, 2026-12-07).
+//!
+//! Least squares over this chain is the fixed-interval Kalman (Rauch-Tung-Striebel)
+//! smoother over the state `(C, t, l)`, O(n) with the smoothed variances, whose square
+//! roots replace the firmware's standard deviations of the centres; the attitudes are not
+//! changed. The right cameras follow through the rig, their standard deviations from the
+//! left camera's. `q` is estimated from the data by variance component estimation
+//! (Förstner's iteration `q <- q * sum(v^2 / q) / r`, `r` the redundancy numbers) on the
+//! chain per coordinate of the steps between fixes, since the images' step precision
+//! depends on the scene and the rig; the fixes' sigmas are taken as given.
 use crate::dataset::aiding;
 use crate::report::EpochRecord;
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use phototraverse_core::adjust::{right_camera_covariance, standard_deviations};
 use phototraverse_core::camera::{Pose, RelativeOrientation};
 
@@ -54,6 +59,19 @@ const STEP_VARIANCE_BOUNDS: (f64, f64) = (1e-10, 1.0);
 
 /// Variance of a position no observation has reached yet (before the first fix), m^2.
 const DIFFUSE_M2: f64 = 1e8;
+
+/// Standard deviation of the rotation of the images' steps where a stretch without fixes
+/// begins, rad: about the aided window's attitude error on entering an outage (0.8 to
+/// 2.0 mrad RMS per axis on the rendered drives).
+pub const TURN_SD_RAD: f64 = 1.5e-3;
+/// Its random walk per step, rad. Loose on purpose: the images' error turns abruptly in a
+/// tight turn, and a slow walk (0.1 mrad) left a third of the outages' errors outside
+/// their 3 sd, where this one leaves none of 63 below 90 % of the epochs.
+pub const TURN_WALK_RAD: f64 = 2e-3;
+/// Standard deviation of the scale of the images' steps where a stretch without fixes
+/// begins (0.1 %), and its random walk per step.
+pub const SCALE_SD: f64 = 1e-3;
+pub const SCALE_WALK: f64 = 1e-4;
 
 /// What the smoothing did.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -86,7 +104,10 @@ impl Step {
 }
 
 /// One coordinate's chain: the steps into each epoch after the first, and the fixes
-/// (value, variance) where there are.
+/// (value, variance) where there are. The step variance `q` is estimated on the three
+/// chains, where the steps between fixes are what it is the variance of; inside a
+/// stretch without fixes a step's variance grows by the firmware's (`drift`), and those
+/// steps are left out of the estimate.
 struct Chain {
     steps: Vec<Step>,
     fixes: Vec<Option<(f64, f64)>>,
@@ -117,7 +138,7 @@ pub fn smooth_over_fixes(
     let fixed = fixed_centres(epochs, lever_arm_m);
     let chains: Vec<Chain> = (0..3).map(|c| chain(epochs, &fixed, c)).collect();
     let q = estimate_step_variance(&chains);
-    let solved: Vec<Smoothed> = chains.iter().map(|ch| smooth(ch, q)).collect();
+    let solved = smooth_turned(epochs, &fixed, q);
     let (rms_shift_m, largest_shift_m) = apply(epochs, &solved, lever_arm_m, rig);
     Some(SmoothingSummary {
         fixes,
@@ -150,14 +171,14 @@ fn estimate_step_variance(chains: &[Chain]) -> f64 {
 /// centres moved: RMS and largest.
 fn apply(
     epochs: &mut [EpochRecord],
-    solved: &[Smoothed],
+    solved: &[Centre],
     lever_arm_m: [f64; 3],
     rig: &RelativeOrientation,
 ) -> (f64, f64) {
     let (mut sum_sq, mut largest) = (0.0f64, 0.0f64);
-    for (k, e) in epochs.iter_mut().enumerate() {
+    for (e, solved) in epochs.iter_mut().zip(solved) {
         let old = [e.left.x, e.left.y, e.left.z];
-        let new = [solved[0].x[k], solved[1].x[k], solved[2].x[k]];
+        let new = solved.x;
         let shift_sq: f64 = (0..3).map(|c| (new[c] - old[c]).powi(2)).sum();
         sum_sq += shift_sq;
         largest = largest.max(shift_sq.sqrt());
@@ -167,7 +188,7 @@ fn apply(
         // has no attitude precision either: it stays without.
         if let Some(sigma) = e.left.sigma.as_mut() {
             for c in 0..3 {
-                sigma[3 + c] = solved[c].var[k].sqrt();
+                sigma[3 + c] = solved.var[c].sqrt();
             }
         }
         let left = e.left.to_pose();
@@ -216,21 +237,17 @@ fn fixed_centres(epochs: &[EpochRecord], lever_arm_m: [f64; 3]) -> Vec<Option<([
 
 /// Coordinate `c`'s chain of `epochs`, with the centres the fixes observe.
 fn chain(epochs: &[EpochRecord], fixed: &[Option<([f64; 3], f64)>], c: usize) -> Chain {
-    let centre = |e: &EpochRecord| [e.left.x, e.left.y, e.left.z][c];
     let variance = |e: &EpochRecord| e.left.sigma.map(|s| s[3 + c] * s[3 + c]);
     let steps = epochs
         .windows(2)
-        .map(|w| {
-            let (value, factor) = match w[1].step_m {
-                Some(s) => (s[c], 1.0),
-                None => (centre(&w[1]) - centre(&w[0]), FALLBACK_VARIANCE_FACTOR),
-            };
+        .zip(steps(epochs))
+        .map(|(w, (value, factor))| {
             let drift = match (&w[1].gnss, variance(&w[0]), variance(&w[1])) {
                 (None, Some(v0), Some(v1)) => (v1 - v0).max(0.0),
                 _ => 0.0,
             };
             Step {
-                value,
+                value: value[c],
                 factor,
                 drift,
             }
@@ -269,6 +286,152 @@ fn smooth(ch: &Chain, q: f64) -> Smoothed {
         lag_cov[k + 1] = g * var[k + 1];
     }
     Smoothed { x, var, lag_cov }
+}
+
+/// A smoothed centre and its variance per coordinate.
+struct Centre {
+    x: [f64; 3],
+    var: [f64; 3],
+}
+
+/// The state of [`smooth_turned`]: the centre, the turn and the scale of the steps.
+type State = SVector<f64, 7>;
+type StateCov = SMatrix<f64, 7, 7>;
+
+/// The step into an epoch, `C_k = C_{k-1} + s + s x t_k + l_k s` (the turn and scale
+/// terms only into an epoch without a fix), as the transition from the previous state:
+/// the matrix, the shift and the process covariance. `t` and `l` walk on from the
+/// previous epoch inside a stretch without fixes and start from their priors elsewhere
+/// (where a fix holds the epoch they are not coupled and stay at their priors).
+fn transition(
+    s: [f64; 3],
+    step_var: f64,
+    turned: bool,
+    walks: bool,
+) -> (StateCov, State, StateCov) {
+    let cross = Matrix3::new(0.0, -s[2], s[1], s[2], 0.0, -s[0], -s[1], s[0], 0.0);
+    let step = Vector3::from(s);
+    // The noise (white step, turn, scale) enters as G w.
+    let mut g = StateCov::identity();
+    if turned {
+        g.fixed_view_mut::<3, 3>(0, 3).copy_from(&cross);
+        g.fixed_view_mut::<3, 1>(0, 6).copy_from(&step);
+    }
+    let mut f = g;
+    if !walks {
+        f.fixed_view_mut::<7, 4>(0, 3).fill(0.0);
+    }
+    let (turn, scale) = if walks {
+        (TURN_WALK_RAD, SCALE_WALK)
+    } else {
+        (TURN_SD_RAD, SCALE_SD)
+    };
+    let w = StateCov::from_diagonal(&State::from_column_slice(&[
+        step_var,
+        step_var,
+        step_var,
+        turn * turn,
+        turn * turn,
+        turn * turn,
+        scale * scale,
+    ]));
+    let mut shift = State::zeros();
+    shift.fixed_rows_mut::<3>(0).copy_from(&step);
+    (f, shift, g * w * g.transpose())
+}
+
+/// The step into each epoch after the first and its variance factor of `q`.
+fn steps(epochs: &[EpochRecord]) -> Vec<([f64; 3], f64)> {
+    let centre = |e: &EpochRecord| [e.left.x, e.left.y, e.left.z];
+    epochs
+        .windows(2)
+        .map(|w| match w[1].step_m {
+            Some(s) => (s, 1.0),
+            None => {
+                let (a, b) = (centre(&w[0]), centre(&w[1]));
+                ([0, 1, 2].map(|c| b[c] - a[c]), FALLBACK_VARIANCE_FACTOR)
+            }
+        })
+        .collect()
+}
+
+/// The Kalman filter forward and the Rauch-Tung-Striebel pass backward over the state
+/// `(C, t, l)` of the model in the module's documentation, with the step variance `q`.
+fn smooth_turned(epochs: &[EpochRecord], fixed: &[Option<([f64; 3], f64)>], q: f64) -> Vec<Centre> {
+    let n = epochs.len();
+    let steps = steps(epochs);
+    let mut prior = State::zeros();
+    let mut prior_cov = StateCov::from_diagonal(&State::from_column_slice(&[
+        DIFFUSE_M2,
+        DIFFUSE_M2,
+        DIFFUSE_M2,
+        TURN_SD_RAD * TURN_SD_RAD,
+        TURN_SD_RAD * TURN_SD_RAD,
+        TURN_SD_RAD * TURN_SD_RAD,
+        SCALE_SD * SCALE_SD,
+    ]));
+    let (mut filtered, mut predicted, mut transitions) = (
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    );
+    for k in 0..n {
+        if k > 0 {
+            let (s, factor) = steps[k - 1];
+            let turned = fixed[k].is_none();
+            let walks = turned && fixed[k - 1].is_none();
+            let (f, shift, process) = transition(s, q * factor, turned, walks);
+            let (x, p): &(State, StateCov) = &filtered[k - 1];
+            prior = f * x + shift;
+            prior_cov = f * p * f.transpose() + process;
+            transitions.push(f);
+        }
+        predicted.push((prior, prior_cov));
+        filtered.push(match fixed[k] {
+            Some((z, r)) => update(&prior, &prior_cov, Vector3::from(z), r),
+            None => (prior, prior_cov),
+        });
+    }
+    let mut smoothed = filtered.clone();
+    for k in (0..n - 1).rev() {
+        let (xf, pf) = &filtered[k];
+        let (xp, pp) = &predicted[k + 1];
+        // The gain J = P_f F^T P_p^-1; a predicted covariance that cannot be inverted
+        // (never, with the priors above) leaves the filtered state.
+        let Some(gain) = pp
+            .cholesky()
+            .map(|c| c.solve(&(transitions[k] * pf)).transpose())
+        else {
+            continue;
+        };
+        let (xs, ps) = smoothed[k + 1];
+        smoothed[k] = (
+            xf + gain * (xs - xp),
+            pf + gain * (ps - pp) * gain.transpose(),
+        );
+    }
+    smoothed
+        .iter()
+        .map(|(x, p)| Centre {
+            x: [x[0], x[1], x[2]],
+            var: [p[(0, 0)], p[(1, 1)], p[(2, 2)]],
+        })
+        .collect()
+}
+
+/// The filter's update by a fix `z` of the centre with variance `r` per coordinate.
+fn update(x: &State, p: &StateCov, z: Vector3<f64>, r: f64) -> (State, StateCov) {
+    let innovation_cov = p.fixed_view::<3, 3>(0, 0) + Matrix3::identity() * r;
+    let Some(chol) = innovation_cov.cholesky() else {
+        return (*x, *p);
+    };
+    // K = P H^T S^-1, H = [I 0]: the first three columns of P.
+    let gain = chol
+        .solve(&p.fixed_view::<3, 7>(0, 0).into_owned())
+        .transpose();
+    let x = x + gain * (z - x.fixed_rows::<3>(0));
+    let p = p - gain * p.fixed_view::<3, 7>(0, 0);
+    (x, (p + p.transpose()) * 0.5)
 }
 
 /// Förstner's factor for the step variance: the steps' weighted squared residuals over
@@ -375,10 +538,12 @@ mod tests {
 
     #[test]
     fn an_outage_is_closed_on_the_fixes_at_both_ends_as_a_traverse() {
-        // Exact fixes outside epochs 40..=60, and steps with a 1 cm bias in X: the
-        // images alone end the outage 0.21 m off; the smoothed traverse spreads that
-        // misclosure over the outage, so the bias (a linear drift) is taken out
-        // exactly, as Bowditch's rule would.
+        // Exact fixes outside epochs 40..=60, and steps with a 1 cm bias in X (a turn of
+        // 5 mrad, constant): the images alone end the outage 0.21 m off. The smoothed
+        // traverse spreads that misclosure over the outage. The model expects a turn
+        // that grows from the entry (a random walk), not a constant one, so it leaves
+        // 0.04 m of the drift, where Bowditch's rule would take this one out exactly;
+        // on the rendered drives' outages the growing turn is what is there.
         let (mut records, truth) = drive(
             100,
             |k| (!(40..=60).contains(&k)).then_some([0.0, 2.0 * k as f64, 0.0]),
@@ -394,7 +559,7 @@ mod tests {
         let worst = (40..=60)
             .map(|k| error(&records[k], truth[k]))
             .fold(0.0, f64::max);
-        assert!(worst < 1e-3, "largest error inside the outage {worst}");
+        assert!(worst < 0.05, "largest error inside the outage {worst}");
         // The precision is that of a bridge: largest in the middle of the outage.
         let sd = |k: usize| records[k].left.sigma.unwrap()[3];
         assert!(
@@ -406,43 +571,86 @@ mod tests {
         );
     }
 
+    /// A path along Y that turns a quarter circle of 20 m radius (epochs 31 to 46) and
+    /// goes on along X, at 2 m per epoch.
+    fn turning_path(n: usize) -> Vec<[f64; 3]> {
+        let mut at = [0.0; 3];
+        let mut heading = 0.0f64;
+        (0..n)
+            .map(|k| {
+                if k > 0 {
+                    if (31..=46).contains(&k) {
+                        heading += 0.1;
+                    }
+                    at = [
+                        at[0] + 2.0 * heading.sin(),
+                        at[1] + 2.0 * heading.cos(),
+                        0.0,
+                    ];
+                }
+                at
+            })
+            .collect()
+    }
+
     #[test]
-    fn the_misclosure_is_spread_where_the_firmware_expects_the_drift() {
-        // The steps of epochs 51..=60, the second half of the outage 40..=60, are 1 cm
-        // off in X (as after a turn that shows an attitude error), and the firmware's
-        // standard deviation grows there only. Bowditch's rule would spread the 10 cm
-        // misclosure over the whole outage, 5 cm off at its middle; the firmware's
-        // variance puts it where the drift was.
-        let (mut records, truth) = drive(
-            100,
-            |k| (!(40..=60).contains(&k)).then_some([0.0, 2.0 * k as f64, 0.0]),
-            |k| [if (51..=60).contains(&k) { 0.01 } else { 0.0 }, 0.0, 0.0],
+    fn a_turn_of_the_steps_is_closed_along_the_path() {
+        // The outage 25..=60 holds the quarter turn, and the images' steps inside it are
+        // turned by 2 mrad about the vertical (the attitude error the window enters an
+        // outage with): 0.2 m of misclosure across the turn. A chain per coordinate
+        // spreads each coordinate's misclosure along that coordinate (0.038 m off at
+        // worst); the turn of the steps puts it where the path's shape makes it
+        // (0.014 m).
+        let truth = turning_path(100);
+        let outage = 25..=60;
+        let turn = 2e-3f64;
+        let mut records = records_of(
+            &truth,
+            |k| (!outage.contains(&k)).then_some(truth[k]),
+            |k, d| {
+                if outage.contains(&k) {
+                    let (s, c) = turn.sin_cos();
+                    [c * d[0] - s * d[1] - d[0], s * d[0] + c * d[1] - d[1], 0.0]
+                } else {
+                    [0.0; 3]
+                }
+            },
         );
-        for (k, r) in records.iter_mut().enumerate() {
+        for r in records.iter_mut() {
             if let Some(g) = r.gnss.as_mut() {
                 g.sigma_m = 1e-4;
             }
-            // Its variance grows by (2 cm)^2 per epoch there: in proportion to the
-            // distance, as the drift does.
-            let grown = if (51..=60).contains(&k) {
-                (k - 50) as f64 * 4e-4
-            } else {
-                0.0
-            };
-            let sd = (0.003f64.powi(2) + grown).sqrt();
             let a = 1e-4f64.to_degrees();
-            r.left.sigma = Some([a, a, a, sd, sd, sd]);
+            r.left.sigma = Some([a, a, a, 0.003, 0.003, 0.003]);
         }
+        let worst_of = |x: &dyn Fn(usize) -> [f64; 3]| {
+            outage
+                .clone()
+                .map(|k| {
+                    let p = x(k);
+                    (0..3)
+                        .map(|c| (p[c] - truth[k][c]).powi(2))
+                        .sum::<f64>()
+                        .sqrt()
+                })
+                .fold(0.0, f64::max)
+        };
+        let fixed = fixed_centres(&records, [0.0; 3]);
+        let chains: Vec<Chain> = (0..3).map(|c| chain(&records, &fixed, c)).collect();
+        let q = estimate_step_variance(&chains);
+        let per_coordinate: Vec<Smoothed> = chains.iter().map(|ch| smooth(ch, q)).collect();
+        let chained = worst_of(&|k| [0, 1, 2].map(|c| per_coordinate[c].x[k]));
         // A 0.5 m base along X (the cameras look along Y).
         let rig = RelativeOrientation {
             angles: [0.0; 3],
             base: [0.5, 0.0, 0.0],
         };
         smooth_over_fixes(&mut records, [0.0; 3], &rig).unwrap();
-        let worst = (40..=60)
-            .map(|k| error(&records[k], truth[k]))
-            .fold(0.0, f64::max);
-        assert!(worst < 0.01, "largest error inside the outage {worst}");
+        let turned = worst_of(&|k| [records[k].left.x, records[k].left.y, records[k].left.z]);
+        assert!(
+            turned < 0.02 && turned < chained / 2.0,
+            "largest error inside: turned {turned}, per coordinate {chained}"
+        );
         // The right cameras sit 0.5 m to the right with the smoothed left centres'
         // precision, plus the attitude's 0.1 mrad turning the base: (0.05 mm)^2 in Y
         // (phi) and Z (kappa), nothing along the base.
