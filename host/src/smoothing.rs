@@ -358,49 +358,75 @@ fn steps(epochs: &[EpochRecord]) -> Vec<([f64; 3], f64)> {
 /// The Kalman filter forward and the Rauch-Tung-Striebel pass backward over the state
 /// `(C, t, l)` of the model in the module's documentation, with the step variance `q`.
 fn smooth_turned(epochs: &[EpochRecord], fixed: &[Option<([f64; 3], f64)>], q: f64) -> Vec<Centre> {
+    rts(&filter(epochs, fixed, q))
+        .iter()
+        .map(|(x, p)| Centre {
+            x: [x[0], x[1], x[2]],
+            var: [p[(0, 0)], p[(1, 1)], p[(2, 2)]],
+        })
+        .collect()
+}
+
+/// The filter's pass: per epoch the predicted and the filtered state with their
+/// covariances, and the transition into each epoch after the first (index `k - 1`).
+struct Forward {
+    predicted: Vec<(State, StateCov)>,
+    filtered: Vec<(State, StateCov)>,
+    transitions: Vec<StateCov>,
+}
+
+/// The Kalman filter forward over the epochs, from a diffuse centre and the priors of
+/// the turn and scale.
+fn filter(epochs: &[EpochRecord], fixed: &[Option<([f64; 3], f64)>], q: f64) -> Forward {
     let n = epochs.len();
-    let steps = steps(epochs);
-    let mut prior = State::zeros();
-    let mut prior_cov = StateCov::from_diagonal(&State::from_column_slice(&[
-        DIFFUSE_M2,
-        DIFFUSE_M2,
-        DIFFUSE_M2,
-        TURN_SD_RAD * TURN_SD_RAD,
-        TURN_SD_RAD * TURN_SD_RAD,
-        TURN_SD_RAD * TURN_SD_RAD,
-        SCALE_SD * SCALE_SD,
-    ]));
-    let (mut filtered, mut predicted, mut transitions) = (
-        Vec::with_capacity(n),
-        Vec::with_capacity(n),
-        Vec::with_capacity(n),
+    let mut prior = (
+        State::zeros(),
+        StateCov::from_diagonal(&State::from_column_slice(&[
+            DIFFUSE_M2,
+            DIFFUSE_M2,
+            DIFFUSE_M2,
+            TURN_SD_RAD * TURN_SD_RAD,
+            TURN_SD_RAD * TURN_SD_RAD,
+            TURN_SD_RAD * TURN_SD_RAD,
+            SCALE_SD * SCALE_SD,
+        ])),
     );
+    let mut pass = Forward {
+        predicted: Vec::with_capacity(n),
+        filtered: Vec::with_capacity(n),
+        transitions: Vec::with_capacity(n),
+    };
+    let steps = steps(epochs);
     for k in 0..n {
         if k > 0 {
             let (s, factor) = steps[k - 1];
             let turned = fixed[k].is_none();
             let walks = turned && fixed[k - 1].is_none();
             let (f, shift, process) = transition(s, q * factor, turned, walks);
-            let (x, p): &(State, StateCov) = &filtered[k - 1];
-            prior = f * x + shift;
-            prior_cov = f * p * f.transpose() + process;
-            transitions.push(f);
+            let (x, p) = &pass.filtered[k - 1];
+            prior = (f * x + shift, f * p * f.transpose() + process);
+            pass.transitions.push(f);
         }
-        predicted.push((prior, prior_cov));
-        filtered.push(match fixed[k] {
-            Some((z, r)) => update(&prior, &prior_cov, Vector3::from(z), r),
-            None => (prior, prior_cov),
+        pass.filtered.push(match fixed[k] {
+            Some((z, r)) => update(&prior.0, &prior.1, Vector3::from(z), r),
+            None => prior,
         });
+        pass.predicted.push(prior);
     }
-    let mut smoothed = filtered.clone();
-    for k in (0..n - 1).rev() {
-        let (xf, pf) = &filtered[k];
-        let (xp, pp) = &predicted[k + 1];
+    pass
+}
+
+/// The Rauch-Tung-Striebel pass backward over the filter's.
+fn rts(pass: &Forward) -> Vec<(State, StateCov)> {
+    let mut smoothed = pass.filtered.clone();
+    for k in (0..smoothed.len().saturating_sub(1)).rev() {
+        let (xf, pf) = &pass.filtered[k];
+        let (xp, pp) = &pass.predicted[k + 1];
         // The gain J = P_f F^T P_p^-1; a predicted covariance that cannot be inverted
         // (never, with the priors above) leaves the filtered state.
         let Some(gain) = pp
             .cholesky()
-            .map(|c| c.solve(&(transitions[k] * pf)).transpose())
+            .map(|c| c.solve(&(pass.transitions[k] * pf)).transpose())
         else {
             continue;
         };
@@ -411,12 +437,6 @@ fn smooth_turned(epochs: &[EpochRecord], fixed: &[Option<([f64; 3], f64)>], q: f
         );
     }
     smoothed
-        .iter()
-        .map(|(x, p)| Centre {
-            x: [x[0], x[1], x[2]],
-            var: [p[(0, 0)], p[(1, 1)], p[(2, 2)]],
-        })
-        .collect()
 }
 
 /// The filter's update by a fix `z` of the centre with variance `r` per coordinate.
