@@ -326,18 +326,19 @@ fn transition(
     } else {
         (TURN_SD_RAD, SCALE_SD)
     };
-    let w = StateCov::from_diagonal(&State::from_column_slice(&[
-        step_var,
-        step_var,
-        step_var,
-        turn * turn,
-        turn * turn,
-        turn * turn,
-        scale * scale,
-    ]));
+    let w = independent(step_var, turn, scale);
     let mut shift = State::zeros();
     shift.fixed_rows_mut::<3>(0).copy_from(&step);
     (f, shift, g * w * g.transpose())
+}
+
+/// The covariance of independent `(C, t, l)`: the centre's variance per coordinate, the
+/// turn's and the scale's standard deviations.
+fn independent(centre_var: f64, turn: f64, scale: f64) -> StateCov {
+    let (t, l) = (turn * turn, scale * scale);
+    StateCov::from_diagonal(&State::from_column_slice(&[
+        centre_var, centre_var, centre_var, t, t, t, l,
+    ]))
 }
 
 /// The step into each epoch after the first and its variance factor of `q`.
@@ -381,15 +382,7 @@ fn filter(epochs: &[EpochRecord], fixed: &[Option<([f64; 3], f64)>], q: f64) -> 
     let n = epochs.len();
     let mut prior = (
         State::zeros(),
-        StateCov::from_diagonal(&State::from_column_slice(&[
-            DIFFUSE_M2,
-            DIFFUSE_M2,
-            DIFFUSE_M2,
-            TURN_SD_RAD * TURN_SD_RAD,
-            TURN_SD_RAD * TURN_SD_RAD,
-            TURN_SD_RAD * TURN_SD_RAD,
-            SCALE_SD * SCALE_SD,
-        ])),
+        independent(DIFFUSE_M2, TURN_SD_RAD, SCALE_SD),
     );
     let mut pass = Forward {
         predicted: Vec::with_capacity(n),
