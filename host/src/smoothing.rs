@@ -136,9 +136,10 @@ pub fn smooth_over_fixes(
         return None;
     }
     let fixed = fixed_centres(epochs, lever_arm_m);
-    let chains: Vec<Chain> = (0..3).map(|c| chain(epochs, &fixed, c)).collect();
+    let steps = steps(epochs);
+    let chains: Vec<Chain> = (0..3).map(|c| chain(epochs, &steps, &fixed, c)).collect();
     let q = estimate_step_variance(&chains);
-    let solved = smooth_turned(epochs, &fixed, q);
+    let solved = smooth_turned(&steps, &fixed, q);
     let (rms_shift_m, largest_shift_m) = apply(epochs, &solved, lever_arm_m, rig);
     Some(SmoothingSummary {
         fixes,
@@ -235,13 +236,19 @@ fn fixed_centres(epochs: &[EpochRecord], lever_arm_m: [f64; 3]) -> Vec<Option<([
         .collect()
 }
 
-/// Coordinate `c`'s chain of `epochs`, with the centres the fixes observe.
-fn chain(epochs: &[EpochRecord], fixed: &[Option<([f64; 3], f64)>], c: usize) -> Chain {
+/// Coordinate `c`'s chain of `epochs` with their `steps` ([`steps`]), and the centres
+/// the fixes observe.
+fn chain(
+    epochs: &[EpochRecord],
+    steps: &[([f64; 3], f64)],
+    fixed: &[Option<([f64; 3], f64)>],
+    c: usize,
+) -> Chain {
     let variance = |e: &EpochRecord| e.left.sigma.map(|s| s[3 + c] * s[3 + c]);
     let steps = epochs
         .windows(2)
-        .zip(steps(epochs))
-        .map(|(w, (value, factor))| {
+        .zip(steps)
+        .map(|(w, &(value, factor))| {
             let drift = match (&w[1].gnss, variance(&w[0]), variance(&w[1])) {
                 (None, Some(v0), Some(v1)) => (v1 - v0).max(0.0),
                 _ => 0.0,
@@ -309,8 +316,8 @@ fn transition(
     turned: bool,
     walks: bool,
 ) -> (StateCov, State, StateCov) {
-    let cross = Matrix3::new(0.0, -s[2], s[1], s[2], 0.0, -s[0], -s[1], s[0], 0.0);
     let step = Vector3::from(s);
+    let cross = step.cross_matrix();
     // The noise (white step, turn, scale) enters as G w.
     let mut g = StateCov::identity();
     if turned {
@@ -358,8 +365,12 @@ fn steps(epochs: &[EpochRecord]) -> Vec<([f64; 3], f64)> {
 
 /// The Kalman filter forward and the Rauch-Tung-Striebel pass backward over the state
 /// `(C, t, l)` of the model in the module's documentation, with the step variance `q`.
-fn smooth_turned(epochs: &[EpochRecord], fixed: &[Option<([f64; 3], f64)>], q: f64) -> Vec<Centre> {
-    rts(&filter(epochs, fixed, q))
+fn smooth_turned(
+    steps: &[([f64; 3], f64)],
+    fixed: &[Option<([f64; 3], f64)>],
+    q: f64,
+) -> Vec<Centre> {
+    rts(&filter(steps, fixed, q))
         .iter()
         .map(|(x, p)| Centre {
             x: [x[0], x[1], x[2]],
@@ -378,8 +389,8 @@ struct Forward {
 
 /// The Kalman filter forward over the epochs, from a diffuse centre and the priors of
 /// the turn and scale.
-fn filter(epochs: &[EpochRecord], fixed: &[Option<([f64; 3], f64)>], q: f64) -> Forward {
-    let n = epochs.len();
+fn filter(steps: &[([f64; 3], f64)], fixed: &[Option<([f64; 3], f64)>], q: f64) -> Forward {
+    let n = fixed.len();
     let mut prior = (
         State::zeros(),
         independent(DIFFUSE_M2, TURN_SD_RAD, SCALE_SD),
@@ -389,7 +400,6 @@ fn filter(epochs: &[EpochRecord], fixed: &[Option<([f64; 3], f64)>], q: f64) -> 
         filtered: Vec::with_capacity(n),
         transitions: Vec::with_capacity(n),
     };
-    let steps = steps(epochs);
     for k in 0..n {
         if k > 0 {
             let (s, factor) = steps[k - 1];
@@ -649,7 +659,8 @@ mod tests {
                 .fold(0.0, f64::max)
         };
         let fixed = fixed_centres(&records, [0.0; 3]);
-        let chains: Vec<Chain> = (0..3).map(|c| chain(&records, &fixed, c)).collect();
+        let steps = steps(&records);
+        let chains: Vec<Chain> = (0..3).map(|c| chain(&records, &steps, &fixed, c)).collect();
         let q = estimate_step_variance(&chains);
         let per_coordinate: Vec<Smoothed> = chains.iter().map(|ch| smooth(ch, q)).collect();
         let chained = worst_of(&|k| [0, 1, 2].map(|c| per_coordinate[c].x[k]));
