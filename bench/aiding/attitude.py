@@ -20,12 +20,20 @@ whose gt_poses.txt is the truth), four views, angles in mrad:
 - `--rotations A..B,...`: the error of the steps' relative rotations (each in the earlier
   camera's frame: about `x` right, the slope; `y` down, the heading; `z` forward, the roll),
   summed over each stretch: what the images turned wrongly there.
+- `--coverage`: whether the standard deviations of the angles in eop.csv cover their errors:
+  the truth's omega, phi and kappa against eop.csv's, the share of epochs with all three
+  within 3 sd (each angle's share too) and the median of error / sd per angle (0.67 for
+  normal errors), over all the runs together; `--skip A..B,...` leaves epochs out (an
+  outage with its entry and exit), `--only A..B,...` keeps those alone, epochs 0 to 19 are
+  always left out (the datum's neighbours, whose sd is near 0).
 
 usage: attitude.py RUN_DIR [RUN_DIR ...] [--every N] [--turns] [--stretches A..B,...]
-                   [--rotations A..B,...] [--truth GT_POSES]
+                   [--rotations A..B,...] [--coverage [--skip A..B,...|--only A..B,...]]
+                   [--truth GT_POSES]
 (numpy, scipy)
 """
 import argparse
+import csv
 import json
 import os
 
@@ -142,6 +150,57 @@ def show_rotations(name, truth, est, stretches):
         print(f"  {a:5d}..{b:<5d} {total[0]:6.2f} {total[1]:6.2f} {total[2]:6.2f}")
 
 
+# The datum camera's frame (x right, y down, z forward) into the object frame (X right,
+# Y forward, Z up), and the photogrammetric image frame (x right, y up, z back) from the
+# camera's: M = D (A R)^T = R3(kappa) R2(phi) R1(omega) takes the object frame to the image.
+A = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])
+D = np.diag([1.0, -1, -1])
+# Epochs after the datum left out of the coverage: their sd is near 0.
+COVERAGE_FROM = 20
+
+
+def angles_deg(pose):
+    """Omega, phi, kappa (deg) of a KITTI pose (camera to the datum camera's frame)."""
+    m = D @ (A @ pose[:, :3]).T
+    return np.degrees([np.arctan2(-m[2, 1], m[2, 2]), np.arcsin(np.clip(m[2, 0], -1, 1)),
+                       np.arctan2(-m[1, 0], m[0, 0])])
+
+
+def angle_errors(run, truth):
+    """Per left epoch with standard deviations: |error| and sd of omega, phi, kappa (deg)."""
+    rows = [r for r in csv.DictReader(open(os.path.join(run, "eop.csv")))
+            if r["camera"] == "left"]
+    out = {}
+    for k, r in enumerate(rows):
+        if not r["sd_omega_deg"]:
+            continue
+        est = np.array([float(r[a + "_deg"]) for a in ("omega", "phi", "kappa")])
+        sd = np.array([float(r["sd_" + a + "_deg"]) for a in ("omega", "phi", "kappa")])
+        err = (est - angles_deg(truth[k]) + 180) % 360 - 180
+        out[k] = (np.abs(err), sd)
+    return out
+
+
+def show_coverage(runs, truth_file, skip, only):
+    inside = lambda k, spans: any(a <= k <= b for a, b in spans)
+    err, sd = [], []
+    for run in runs:
+        truth, _ = load(run, truth_file)
+        for k, (e, s) in angle_errors(run, truth).items():
+            if k < COVERAGE_FROM or inside(k, skip) or (only and not inside(k, only)):
+                continue
+            err.append(e)
+            sd.append(s)
+    err, sd = np.array(err), np.array(sd)
+    within = err <= 3 * sd
+    share = within.mean(axis=0) * 100
+    median = np.median(err / sd, axis=0)
+    print(f"{len(err)} epochs of {len(runs)} runs: all three angles within 3 sd "
+          f"{within.all(axis=1).mean() * 100:.1f} %; omega / phi / kappa "
+          f"{share[0]:.1f} / {share[1]:.1f} / {share[2]:.1f} %; median error / sd "
+          f"{median[0]:.2f} / {median[1]:.2f} / {median[2]:.2f}")
+
+
 def parse_stretches(text):
     return [tuple(int(v) for v in s.split("..")) for s in text.split(",") if s]
 
@@ -156,10 +215,20 @@ def main():
                       help="the mean error of the steps' direction in the camera frame")
     view.add_argument("--rotations", default="", metavar="A..B,...",
                       help="the summed error of the steps' rotations in the camera frame")
+    view.add_argument("--coverage", action="store_true",
+                      help="whether eop.csv's standard deviations of the angles cover their errors")
+    ap.add_argument("--skip", default="", metavar="A..B,...",
+                    help="with --coverage: epochs left out (an outage, its entry and exit)")
+    ap.add_argument("--only", default="", metavar="A..B,...",
+                    help="with --coverage: only these epochs")
     ap.add_argument("--truth", help="gt_poses.txt, for a run without a report.json (the peer's)")
     args = ap.parse_args()
     stretches = parse_stretches(args.stretches)
     rotations = parse_stretches(args.rotations)
+    if args.coverage:
+        show_coverage(args.runs, args.truth, parse_stretches(args.skip),
+                      parse_stretches(args.only))
+        return
     for run in args.runs:
         truth, est = load(run, args.truth)
         if stretches:

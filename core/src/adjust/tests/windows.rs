@@ -545,6 +545,43 @@ fn precise_tie_points_beside_gnss_fixes_are_not_flagged() {
     assert!(r.flagged * 100 <= n, "{} of {n} flagged: {r:?}", r.flagged);
 }
 
+/// A window anchored by fixes has no fixed epochs: its covariance is the whole of an
+/// epoch's with respect to the datum. With tie points more precise than they are
+/// weighted, sigma0 falls far below 1, and the window's own standard deviations with
+/// it; those with respect to the datum stay at their a-priori value (sigma0 = 1), as a
+/// leaving epoch's do, since the a-posteriori scale does not see the errors a traverse
+/// accumulates.
+#[test]
+fn a_window_anchored_by_fixes_gives_its_precision_at_no_less_than_the_a_priori() {
+    let s = scene(61, 6, 150, 0.0);
+    let cfg = AdjustConfig {
+        window: 6,
+        max_points: 150,
+        max_observations: s.observations.len(),
+        ..AdjustConfig::default()
+    };
+    let mut mem = arena_for(&cfg);
+    let mut arena = Arena::new(&mut mem);
+    let (mut w, _) = load_weighted(&s, cfg, &mut arena, 62, 1.0 / 400.0);
+    let mut rng = Rng(63);
+    for e in 0..s.poses.len() {
+        set_gnss_fix(&mut w, &s, e, &mut rng);
+    }
+    let r = w.solve().unwrap();
+    assert!(r.sigma0 < 0.5, "{r:?}");
+    for i in 0..s.poses.len() {
+        let own = w.epoch_std(i).unwrap();
+        let absolute = w.epoch_absolute_std(i).unwrap();
+        for (a, o) in absolute.iter().zip(&own) {
+            assert!(
+                (a * r.sigma0 - o).abs() <= 1e-6 * o,
+                "epoch {i}: with respect to the datum {absolute:?}, the window's own {own:?}, sigma0 {}",
+                r.sigma0
+            );
+        }
+    }
+}
+
 #[test]
 fn control_points_carry_a_loose_datum() {
     // Datum almost free (0.1 rad, 1 m); eight control points at 5 mm fix the block.

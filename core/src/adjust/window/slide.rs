@@ -38,7 +38,7 @@ impl<'a> Window<'a> {
                 // Without a covariance of its own (its solve failed) it passes the
                 // anchor's on: the accumulated uncertainty is not lost.
                 cov: self
-                    .leaving_covariance()
+                    .absolute_turn_covariance(0)
                     .unwrap_or_else(|| self.plus_anchor(0, [0.0; 36])),
             };
             let expired = (self.n_fixed == cap).then(|| gone.wrapping_sub(cap as u32));
