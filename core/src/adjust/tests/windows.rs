@@ -516,70 +516,63 @@ fn gnss_and_odometer_constraints_enter_the_adjustment() {
     assert!(ok as f64 >= 0.99 * n as f64, "{ok}/{n}");
 }
 
-/// Tie points far more precise than their a-priori sigma (least-squares matching puts
-/// most within a few hundredths of a pixel against the default 0.5 px) beside 2 cm
-/// GNSS fixes at every epoch: the fixes' noise shows in the image residuals as much
-/// as the images' own, and on the images' median scale data snooping took those for
+/// Seed 61's six epochs with tie points far more precise than their a-priori sigma
+/// (weighted as if 20 times less precise than they are: least-squares matching puts most
+/// within a few hundredths of a pixel against the default 0.5 px) beside a 2 cm GNSS fix
+/// at every epoch, solved; `check` gets the window, its report and the epochs' count.
+fn solve_precise_ties_beside_fixes(check: impl FnOnce(&mut Window<'_>, Report, usize)) {
+    let s = scene(61, 6, 150, 0.0);
+    let cfg = AdjustConfig {
+        window: 6,
+        max_points: 150,
+        max_observations: s.observations.len(),
+        ..AdjustConfig::default()
+    };
+    let mut mem = arena_for(&cfg);
+    let mut arena = Arena::new(&mut mem);
+    let (mut w, _) = load_weighted(&s, cfg, &mut arena, 62, 1.0 / 400.0);
+    let mut rng = Rng(63);
+    for e in 0..s.poses.len() {
+        set_gnss_fix(&mut w, &s, e, &mut rng);
+    }
+    let r = w.solve().unwrap();
+    check(&mut w, r, s.poses.len());
+}
+
+/// Precise tie points beside fixes: the fixes' noise shows in the image residuals as
+/// much as the images' own, and on the images' median scale data snooping took those for
 /// blunders, as the clean data of [`robust_default_flags_blunders_on_clean_and_dirty_data`]
 /// are not. The floor on that scale (`MIN_SNOOPING_SCALE`) keeps them.
 #[test]
 fn precise_tie_points_beside_gnss_fixes_are_not_flagged() {
-    let s = scene(61, 6, 150, 0.0);
-    let cfg = AdjustConfig {
-        window: 6,
-        max_points: 150,
-        max_observations: s.observations.len(),
-        ..AdjustConfig::default()
-    };
-    let mut mem = arena_for(&cfg);
-    let mut arena = Arena::new(&mut mem);
-    // The observations weighted as if 20 times less precise than they are.
-    let (mut w, _) = load_weighted(&s, cfg, &mut arena, 62, 1.0 / 400.0);
-    let mut rng = Rng(63);
-    for e in 0..s.poses.len() {
-        set_gnss_fix(&mut w, &s, e, &mut rng);
-    }
-    let r = w.solve().unwrap();
-    let n = w.observations().len();
-    // Measured: none flagged; 41 (2.4 %) on the images' own median scale.
-    assert!(r.flagged * 100 <= n, "{} of {n} flagged: {r:?}", r.flagged);
+    solve_precise_ties_beside_fixes(|w, r, _| {
+        let n = w.observations().len();
+        // Measured: none flagged; 41 (2.4 %) on the images' own median scale.
+        assert!(r.flagged * 100 <= n, "{} of {n} flagged: {r:?}", r.flagged);
+    });
 }
 
 /// A window anchored by fixes has no fixed epochs: its covariance is the whole of an
-/// epoch's with respect to the datum. With tie points more precise than they are
-/// weighted, sigma0 falls far below 1, and the window's own standard deviations with
-/// it; those with respect to the datum stay at their a-priori value (sigma0 = 1), as a
-/// leaving epoch's do, since the a-posteriori scale does not see the errors a traverse
-/// accumulates.
+/// epoch's with respect to the datum. With precise tie points sigma0 falls far below 1,
+/// and the window's own standard deviations with it; those with respect to the datum
+/// stay at their a-priori value (sigma0 = 1), as a leaving epoch's do, since the
+/// a-posteriori scale does not see the errors a traverse accumulates.
 #[test]
 fn a_window_anchored_by_fixes_gives_its_precision_at_no_less_than_the_a_priori() {
-    let s = scene(61, 6, 150, 0.0);
-    let cfg = AdjustConfig {
-        window: 6,
-        max_points: 150,
-        max_observations: s.observations.len(),
-        ..AdjustConfig::default()
-    };
-    let mut mem = arena_for(&cfg);
-    let mut arena = Arena::new(&mut mem);
-    let (mut w, _) = load_weighted(&s, cfg, &mut arena, 62, 1.0 / 400.0);
-    let mut rng = Rng(63);
-    for e in 0..s.poses.len() {
-        set_gnss_fix(&mut w, &s, e, &mut rng);
-    }
-    let r = w.solve().unwrap();
-    assert!(r.sigma0 < 0.5, "{r:?}");
-    for i in 0..s.poses.len() {
-        let own = w.epoch_std(i).unwrap();
-        let absolute = w.epoch_absolute_std(i).unwrap();
-        for (a, o) in absolute.iter().zip(&own) {
-            assert!(
-                (a * r.sigma0 - o).abs() <= 1e-6 * o,
-                "epoch {i}: with respect to the datum {absolute:?}, the window's own {own:?}, sigma0 {}",
-                r.sigma0
-            );
+    solve_precise_ties_beside_fixes(|w, r, n| {
+        assert!(r.sigma0 < 0.5, "{r:?}");
+        for i in 0..n {
+            let own = w.epoch_std(i).unwrap();
+            let absolute = w.epoch_absolute_std(i).unwrap();
+            for (a, o) in absolute.iter().zip(&own) {
+                assert!(
+                    (a * r.sigma0 - o).abs() <= 1e-6 * o,
+                    "epoch {i}: with respect to the datum {absolute:?}, the window's own {own:?}, sigma0 {}",
+                    r.sigma0
+                );
+            }
         }
-    }
+    });
 }
 
 #[test]
