@@ -5,6 +5,8 @@
 //! the run states grow with the distance from the last fix.
 mod common;
 use common::ok;
+use phototraverse_core::camera::{pose_from_kitti, Pose};
+use phototraverse_host::poses::read_poses;
 use std::path::Path;
 
 /// The outage, seconds: epochs 40 to 70 of the drive (2 m per epoch, 10 per second),
@@ -168,60 +170,44 @@ fn the_images_bridge_an_outage_over_a_turn() {
 }
 
 /// The epochs of `eop` (eop.csv's text) whose omega, phi and kappa are all within 3
-/// of their standard deviations of the truth (the dataset's `gt_poses.txt`), and the
-/// epochs with standard deviations. With fixes, the window's own covariance is an
-/// epoch's whole covariance: at the a-posteriori sigma0 (about 0.2) it covered 40 of
-/// this drive's 89 epochs (main 7737ed2); at its a-priori value, 88.
+/// of their standard deviations of the truth (the dataset's `gt_poses.txt`, relative
+/// to the first epoch, whose pose `eop` gives), and the epochs with standard
+/// deviations. With fixes, the window's own covariance is an epoch's whole covariance:
+/// at the a-posteriori sigma0 (about 0.2) it covered 40 of this drive's 89 epochs (main
+/// 7737ed2); at its a-priori value, 88.
 fn angles_within_3_sd(ds: &Path, eop: &str) -> (usize, usize) {
-    let truth: Vec<[f64; 3]> = std::fs::read_to_string(ds.join("gt_poses.txt"))
-        .unwrap()
-        .lines()
-        .filter(|l| !l.trim().is_empty() && !l.starts_with('#'))
-        .map(|l| {
-            let v: Vec<f64> = l.split_whitespace().map(|x| x.parse().unwrap()).collect();
-            angles_of_kitti_rotation(|r, c| v[4 * r + c])
-        })
-        .collect();
+    let truth = read_poses(&ds.join("gt_poses.txt")).unwrap();
     let mut lines = eop.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
     let angle = ["omega_deg", "phi_deg", "kappa_deg"].map(col);
+    let centre = ["X_m", "Y_m", "Z_m"].map(col);
     let sd = ["sd_omega_deg", "sd_phi_deg", "sd_kappa_deg"].map(col);
+    let rows: Vec<Vec<f64>> = lines
+        .filter(|l| l.contains(",left,"))
+        .map(|l| {
+            l.split(',')
+                .map(|v| v.parse().unwrap_or(f64::NAN))
+                .collect()
+        })
+        .collect();
+    let first = &rows[0];
+    let [omega, phi, kappa] = angle.map(|c| first[c]);
+    let datum = Pose::from_degrees(omega, phi, kappa, centre.map(|c| first[c]));
     let (mut covered, mut n) = (0, 0);
-    for (k, line) in lines.filter(|l| l.contains(",left,")).enumerate() {
-        let f: Vec<&str> = line.split(',').collect();
-        if f[sd[0]].is_empty() {
+    for (row, gt) in rows.iter().zip(&truth) {
+        if row[sd[0]].is_nan() {
             continue;
         }
         n += 1;
-        let within = (0..3).all(|a| {
-            let e = (f[angle[a]].parse::<f64>().unwrap() - truth[k][a] + 540.0) % 360.0 - 180.0;
-            e.abs() <= 3.0 * f[sd[a]].parse::<f64>().unwrap()
+        let t = pose_from_kitti(&datum, gt);
+        let within = [t.omega, t.phi, t.kappa].iter().enumerate().all(|(a, v)| {
+            let e = (row[angle[a]] - v.to_degrees() + 540.0) % 360.0 - 180.0;
+            e.abs() <= 3.0 * row[sd[a]]
         });
         covered += within as usize;
     }
     (covered, n)
-}
-
-/// Omega, phi, kappa (deg) of a camera whose KITTI rotation (camera to the datum
-/// camera's frame: x right, y down, z forward) has entries `r(row, col)`. The object
-/// frame is X right, Y forward, Z up from the datum, and `M = R3(kappa) R2(phi)
-/// R1(omega)` takes it to the image frame (x right, y up, z back): `M = D (A R)^T`
-/// with `A` the datum camera's frame into the object's and `D = diag(1, -1, -1)`.
-fn angles_of_kitti_rotation(r: impl Fn(usize, usize) -> f64) -> [f64; 3] {
-    // A R: rows X = x, Y = z, Z = -y of R; M's entry (i, j) is D_i (A R)(j, i).
-    let ar = |row: usize, c: usize| match row {
-        0 => r(0, c),
-        1 => r(2, c),
-        _ => -r(1, c),
-    };
-    let d = [1.0, -1.0, -1.0];
-    let m = |i: usize, j: usize| d[i] * ar(j, i);
-    [
-        (-m(2, 1)).atan2(m(2, 2)).to_degrees(),
-        m(2, 0).clamp(-1.0, 1.0).asin().to_degrees(),
-        (-m(1, 0)).atan2(m(0, 0)).to_degrees(),
-    ]
 }
 
 /// Geodetic fixes of an antenna 1.2 m above, 0.5 m behind and 0.3 m right of the left
