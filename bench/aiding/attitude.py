@@ -150,33 +150,44 @@ def show_rotations(name, truth, est, stretches):
         print(f"  {a:5d}..{b:<5d} {total[0]:6.2f} {total[1]:6.2f} {total[2]:6.2f}")
 
 
-# The datum camera's frame (x right, y down, z forward) into the object frame (X right,
-# Y forward, Z up), and the photogrammetric image frame (x right, y up, z back) from the
-# camera's: M = D (A R)^T = R3(kappa) R2(phi) R1(omega) takes the object frame to the image.
-A = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])
-D = np.diag([1.0, -1, -1])
+# The camera frame of a KITTI pose (x right, y down, z forward) against the
+# photogrammetric image frame (x right, y up, z back).
+FLIP = np.diag([1.0, -1, -1])
 # Epochs after the datum left out of the coverage: their sd is near 0.
 COVERAGE_FROM = 20
 
 
-def angles_deg(pose):
-    """Omega, phi, kappa (deg) of a KITTI pose (camera to the datum camera's frame)."""
-    m = D @ (A @ pose[:, :3]).T
+def rotation(omega, phi, kappa):
+    """M = R3(kappa) R2(phi) R1(omega) (object to image), angles in radians."""
+    co, so, cp, sp, ck, sk = (np.cos(omega), np.sin(omega), np.cos(phi), np.sin(phi),
+                              np.cos(kappa), np.sin(kappa))
+    r1 = np.array([[1, 0, 0], [0, co, so], [0, -so, co]])
+    r2 = np.array([[cp, 0, -sp], [0, 1, 0], [sp, 0, cp]])
+    r3 = np.array([[ck, sk, 0], [-sk, ck, 0], [0, 0, 1]])
+    return r3 @ r2 @ r1
+
+
+def angles_deg(pose, m0):
+    """Omega, phi, kappa (deg) of a KITTI pose relative to the datum epoch whose rotation
+    is `m0`: `M = F R^T F M0`, as the product's `pose_from_kitti`."""
+    m = FLIP @ pose[:, :3].T @ FLIP @ m0
     return np.degrees([np.arctan2(-m[2, 1], m[2, 2]), np.arcsin(np.clip(m[2, 0], -1, 1)),
                        np.arctan2(-m[1, 0], m[0, 0])])
 
 
 def angle_errors(run, truth):
-    """Per left epoch with standard deviations: |error| and sd of omega, phi, kappa (deg)."""
+    """Per left epoch with standard deviations: |error| and sd of omega, phi, kappa (deg);
+    the datum is the run's first epoch."""
     rows = [r for r in csv.DictReader(open(os.path.join(run, "eop.csv")))
             if r["camera"] == "left"]
+    m0 = rotation(*np.radians([float(rows[0][a + "_deg"]) for a in ("omega", "phi", "kappa")]))
     out = {}
     for k, r in enumerate(rows):
         if not r["sd_omega_deg"]:
             continue
         est = np.array([float(r[a + "_deg"]) for a in ("omega", "phi", "kappa")])
         sd = np.array([float(r["sd_" + a + "_deg"]) for a in ("omega", "phi", "kappa")])
-        err = (est - angles_deg(truth[k]) + 180) % 360 - 180
+        err = (est - angles_deg(truth[k], m0) + 180) % 360 - 180
         out[k] = (np.abs(err), sd)
     return out
 
