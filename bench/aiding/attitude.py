@@ -36,9 +36,13 @@ import argparse
 import csv
 import json
 import os
+import sys
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "traverse"))
+from photogrammetry import F, angles, rotation  # noqa: E402  (the shared conventions)
 
 # A turn: the truth's heading changes by more than this per epoch (deg) ...
 TURN_RATE_DEG = 0.5
@@ -150,29 +154,14 @@ def show_rotations(name, truth, est, stretches):
         print(f"  {a:5d}..{b:<5d} {total[0]:6.2f} {total[1]:6.2f} {total[2]:6.2f}")
 
 
-# The camera frame of a KITTI pose (x right, y down, z forward) against the
-# photogrammetric image frame (x right, y up, z back).
-FLIP = np.diag([1.0, -1, -1])
 # Epochs after the datum left out of the coverage: their sd is near 0.
 COVERAGE_FROM = 20
-
-
-def rotation(omega, phi, kappa):
-    """M = R3(kappa) R2(phi) R1(omega) (object to image), angles in radians."""
-    co, so, cp, sp, ck, sk = (np.cos(omega), np.sin(omega), np.cos(phi), np.sin(phi),
-                              np.cos(kappa), np.sin(kappa))
-    r1 = np.array([[1, 0, 0], [0, co, so], [0, -so, co]])
-    r2 = np.array([[cp, 0, -sp], [0, 1, 0], [sp, 0, cp]])
-    r3 = np.array([[ck, sk, 0], [-sk, ck, 0], [0, 0, 1]])
-    return r3 @ r2 @ r1
 
 
 def angles_deg(pose, m0):
     """Omega, phi, kappa (deg) of a KITTI pose relative to the datum epoch whose rotation
     is `m0`: `M = F R^T F M0`, as the product's `pose_from_kitti`."""
-    m = FLIP @ pose[:, :3].T @ FLIP @ m0
-    return np.degrees([np.arctan2(-m[2, 1], m[2, 2]), np.arcsin(np.clip(m[2, 0], -1, 1)),
-                       np.arctan2(-m[1, 0], m[0, 0])])
+    return np.degrees(angles(F @ pose[:, :3].T @ F @ m0))
 
 
 def angle_errors(run, truth):

@@ -43,6 +43,17 @@ def centre(e):
     return np.array([e["left"]["x"], e["left"]["y"], e["left"]["z"]])
 
 
+def reanchored_offsets(images_dir, first):
+    """The images-only run's position errors (m, per epoch, KITTI frame of poses.txt) once
+    its pose at epoch `first` is put onto the true one (gt_poses.txt) and the rest of its
+    trajectory moved rigidly with it."""
+    dataset = json.load(open(f"{images_dir}/report.json"))["dataset"]
+    truth = kitti(f"{dataset}/gt_poses.txt")
+    est = kitti(f"{images_dir}/poses.txt")
+    anchor = truth[first] @ np.linalg.inv(est[first])
+    return [(anchor @ e)[:3, 3] - t[:3, 3] for e, t in zip(est, truth)]
+
+
 def main():
     aided_dir, images_dir, t0, t1 = sys.argv[1], sys.argv[2], float(sys.argv[3]), float(sys.argv[4])
     ep, gt = load(aided_dir)
@@ -51,16 +62,11 @@ def main():
     outside = [i for i, e in enumerate(ep) if not t0 <= e["time"] <= t1]
     err = np.array([centre(e) - gt[i] for i, e in enumerate(ep)])
     first = inside[0]
-    # Re-anchoring in the KITTI frame of poses.txt: the images-only pose at `first` onto
-    # the true one (gt_poses.txt), the rest of the trajectory moved rigidly with it.
-    dataset = json.load(open(f"{images_dir}/report.json"))["dataset"]
-    truth = kitti(f"{dataset}/gt_poses.txt")
-    est = kitti(f"{images_dir}/poses.txt")
-    anchor = truth[first] @ np.linalg.inv(est[first])
-    img_err = [np.linalg.norm((anchor @ est[i])[:3, 3] - truth[i][:3, 3]) for i in inside]
+    reanchored = reanchored_offsets(images_dir, first)
+    img_err = [np.linalg.norm(reanchored[i]) for i in inside]
     # Closed at both ends: a perfect entry and the fixes' return, the misclosure spread.
-    after = min(inside[-1] + 1, len(truth) - 1)
-    offsets = [(anchor @ est[i])[:3, 3] - truth[i][:3, 3] for i in range(first, after + 1)]
+    after = min(inside[-1] + 1, len(reanchored) - 1)
+    offsets = reanchored[first : after + 1]
     span = max(after - first, 1)
     closed = [np.linalg.norm(o - offsets[-1] * k / span) for k, o in enumerate(offsets[: len(inside)])]
     norms = np.linalg.norm(err, axis=1)

@@ -29,7 +29,6 @@ usage: turned_smoothing.py AIDED_DIR START_S END_S [--images IMAGES_ONLY_DIR]
        [--step-sd M] [--turn-sd RAD] [--turn-walk RAD] [--scale-sd S] [--scale-walk S]
 """
 import argparse
-import json
 
 import numpy as np
 import scipy.sparse as sp
@@ -62,10 +61,6 @@ class System:
         return spl.spsolve((a.T @ a).tocsc(), a.T @ np.array(self.rhs))
 
 
-def centre(e):
-    return np.array([e["left"]["x"], e["left"]["y"], e["left"]["z"]])
-
-
 def smooth(epochs, inside, args):
     """The centres of every epoch under the model above."""
     n, first, m = len(epochs), inside[0], len(inside)
@@ -74,7 +69,7 @@ def smooth(epochs, inside, args):
     for k, e in enumerate(epochs):
         g = e.get("gnss")
         if g:
-            offset = np.array(g["position"]) + np.array(g["residual_m"]) - centre(e)
+            offset = np.array(g["position"]) + np.array(g["residual_m"]) - outage.centre(e)
             for c in range(3):
                 eq.add([(3 * k + c, 1.0)], g["position"][c] - offset[c], g["sigma_m"])
         if k == 0:
@@ -105,11 +100,8 @@ def smooth(epochs, inside, args):
 
 def images_only_largest(images_dir, inside):
     """The images-only run's largest error inside, re-anchored at the outage's first epoch."""
-    dataset = json.load(open(f"{images_dir}/report.json"))["dataset"]
-    truth = outage.kitti(f"{dataset}/gt_poses.txt")
-    est = outage.kitti(f"{images_dir}/poses.txt")
-    anchor = truth[inside[0]] @ np.linalg.inv(est[inside[0]])
-    return max(np.linalg.norm((anchor @ est[i])[:3, 3] - truth[i][:3, 3]) for i in inside)
+    offsets = outage.reanchored_offsets(images_dir, inside[0])
+    return max(np.linalg.norm(offsets[i]) for i in inside)
 
 
 def main():
@@ -126,7 +118,7 @@ def main():
     args = p.parse_args()
     epochs, truth = outage.load(args.aided)
     inside = [i for i, e in enumerate(epochs) if args.start_s <= e["time"] <= args.end_s]
-    run = np.array([centre(e) for e in epochs])
+    run = np.array([outage.centre(e) for e in epochs])
     model = smooth(epochs, inside, args)
     largest = {name: np.linalg.norm(c - truth, axis=1)[inside].max() for name, c in (("run", run), ("turned", model))}
     bound = images_only_largest(args.images, inside) if args.images else None

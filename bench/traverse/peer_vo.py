@@ -45,6 +45,8 @@ import time
 import numpy as np
 import cv2
 
+from photogrammetry import F, rotation
+
 RATIO = 0.8
 MAX_DY_PX = 1.5
 RANSAC_PX = 1.0
@@ -104,19 +106,6 @@ def read_rig(path):
         raise DatasetError(f"{path}: {e}")
 
 
-def rotation(omega, phi, kappa):
-    """M = Rk Rp Rw (object to camera, photogrammetric axes), angles in radians."""
-    cw, sw, cp, sp, ck, sk = (np.cos(omega), np.sin(omega), np.cos(phi), np.sin(phi),
-                              np.cos(kappa), np.sin(kappa))
-    rw = np.array([[1, 0, 0], [0, cw, sw], [0, -sw, cw]])
-    rp = np.array([[cp, 0, -sp], [0, 1, 0], [sp, 0, cp]])
-    rk = np.array([[ck, sk, 0], [-sk, ck, 0], [0, 0, 1]])
-    return rk @ rp @ rw
-
-
-# KITTI camera axes (x right, y down, z forward) from photogrammetric ones (x right, y up,
-# z backward) and back.
-F = np.diag([1.0, -1.0, -1.0])
 
 
 def distorted_pixels(cam, xc, yc):

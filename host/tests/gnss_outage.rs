@@ -122,25 +122,19 @@ fn the_images_bridge_an_outage_over_a_turn() {
     let text = std::fs::read_to_string(out.join("report.json")).unwrap();
     assert_eq!(text.matches("\"residual_m\"").count(), rows.len() - n_in);
     let gt = ground_truth(&serde_json::from_str(&text).unwrap());
-    let eop = std::fs::read_to_string(out.join("eop.csv")).unwrap();
-    let header: Vec<&str> = eop.lines().next().unwrap().split(',').collect();
-    let speed = header.iter().position(|h| *h == "speed_m_s").unwrap();
+    let eop = Eop::read(&out.join("eop.csv"));
+    let speed = eop.column("speed_m_s");
     let n = gt.len();
     let mut worst_speed = 0.0f64;
-    for (k, line) in eop
-        .lines()
-        .skip(1)
-        .filter(|l| l.contains(",left,"))
-        .enumerate()
-    {
+    for (k, row) in eop.left.iter().enumerate() {
         let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
         let d: f64 = (0..3)
             .map(|i| (gt[b][i] - gt[a][i]).powi(2))
             .sum::<f64>()
             .sqrt();
         let truth = d / (0.1 * (b - a) as f64);
-        let v: f64 = line.split(',').nth(speed).unwrap().parse().unwrap();
-        worst_speed = worst_speed.max((v / truth - 1.0).abs());
+        assert!(row[speed].is_finite(), "epoch {k} has no speed");
+        worst_speed = worst_speed.max((row[speed] / truth - 1.0).abs());
     }
     println!("largest speed error {:.2} %", 100.0 * worst_speed);
     assert!(worst_speed < MAX_SPEED_ERROR, "speed error {worst_speed}");
@@ -169,33 +163,54 @@ fn the_images_bridge_an_outage_over_a_turn() {
     }
 }
 
-/// The epochs of `eop` (eop.csv's text) whose omega, phi and kappa are all within 3
-/// of their standard deviations of the truth (the dataset's `gt_poses.txt`, relative
-/// to the first epoch, whose pose `eop` gives), and the epochs with standard
-/// deviations. With fixes, the window's own covariance is an epoch's whole covariance:
-/// at the a-posteriori sigma0 (about 0.2) it covered 40 of this drive's 89 epochs (main
-/// 7737ed2); at its a-priori value, 88.
-fn angles_within_3_sd(ds: &Path, eop: &str) -> (usize, usize) {
+/// eop.csv: its columns, and the left camera's rows as numbers (an empty field NaN).
+struct Eop {
+    header: Vec<String>,
+    left: Vec<Vec<f64>>,
+}
+
+impl Eop {
+    fn read(path: &Path) -> Eop {
+        let text = std::fs::read_to_string(path).unwrap();
+        let mut lines = text.lines();
+        let header = lines
+            .next()
+            .unwrap()
+            .split(',')
+            .map(str::to_owned)
+            .collect();
+        let left = lines
+            .filter(|l| l.contains(",left,"))
+            .map(|l| {
+                l.split(',')
+                    .map(|v| v.parse().unwrap_or(f64::NAN))
+                    .collect()
+            })
+            .collect();
+        Eop { header, left }
+    }
+
+    fn column(&self, name: &str) -> usize {
+        self.header.iter().position(|h| h == name).unwrap()
+    }
+}
+
+/// The epochs of `eop` whose omega, phi and kappa are all within 3 of their standard
+/// deviations of the truth (the dataset's `gt_poses.txt`, relative to the first epoch,
+/// whose pose `eop` gives), and the epochs with standard deviations. With fixes, the
+/// window's own covariance is an epoch's whole covariance: at the a-posteriori sigma0
+/// (about 0.2) it covered 40 of this drive's 89 epochs (main 7737ed2); at its a-priori
+/// value, 88.
+fn angles_within_3_sd(ds: &Path, eop: &Eop) -> (usize, usize) {
     let truth = read_poses(&ds.join("gt_poses.txt")).unwrap();
-    let mut lines = eop.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
-    let angle = ["omega_deg", "phi_deg", "kappa_deg"].map(col);
-    let centre = ["X_m", "Y_m", "Z_m"].map(col);
-    let sd = ["sd_omega_deg", "sd_phi_deg", "sd_kappa_deg"].map(col);
-    let rows: Vec<Vec<f64>> = lines
-        .filter(|l| l.contains(",left,"))
-        .map(|l| {
-            l.split(',')
-                .map(|v| v.parse().unwrap_or(f64::NAN))
-                .collect()
-        })
-        .collect();
-    let first = &rows[0];
+    let angle = ["omega_deg", "phi_deg", "kappa_deg"].map(|c| eop.column(c));
+    let centre = ["X_m", "Y_m", "Z_m"].map(|c| eop.column(c));
+    let sd = ["sd_omega_deg", "sd_phi_deg", "sd_kappa_deg"].map(|c| eop.column(c));
+    let first = &eop.left[0];
     let [omega, phi, kappa] = angle.map(|c| first[c]);
     let datum = Pose::from_degrees(omega, phi, kappa, centre.map(|c| first[c]));
     let (mut covered, mut n) = (0, 0);
-    for (row, gt) in rows.iter().zip(&truth) {
+    for (row, gt) in eop.left.iter().zip(&truth) {
         if row[sd[0]].is_nan() {
             continue;
         }
