@@ -56,12 +56,15 @@ const MIN_MISMATCH: f32 = 1e-4;
 /// The search of the right position around `right` (as [`refine_match`]), then the
 /// left-right check of [`RefineConfig::back_check_px`].
 ///
-/// On a rectified rig (`rows_only`) the position returned is then re-centred
+/// On a rectified rig (`rows_only`) the position returned then ends with least-squares
+/// matching along the row, or where that does not settle the re-centred parabola
 /// ([`Correlator::recentre`]): the single fit leans towards the descriptor's right
-/// keypoint, where its grid starts. The check still compares the single fits both ways,
-/// so which matches pass is unchanged; measured with the re-centred positions, 100
-/// rendered epochs of `photo-curves` went from 0.060 to 0.049 %, `hard` from 0.129 to
-/// 0.102 %. Off the rows (the general rig geometry's two-axis search: a converging rig,
+/// keypoint, where its grid starts, and the re-centred one by an amount of each
+/// texture's own, a disparity error the window takes for scale. The check still
+/// compares the single fits both ways, so which matches pass is unchanged; re-centring
+/// took 100 rendered epochs of `photo-curves` from 0.060 to 0.049 %, `hard` from 0.129
+/// to 0.102 %, and least squares the eleven scenes of a draw at 320x240 to 0.85 of
+/// that drift. Off the rows (the general rig geometry's two-axis search: a converging rig,
 /// lens distortion, a calibration with a relative rotation) the re-centred position
 /// was worse (`seed2014` 0.086 -> 0.112 %); there least-squares matching
 /// ([`Correlator::least_squares`]) ends the search instead, and where it does not
@@ -328,18 +331,21 @@ const RECENTRE_SETTLED_PX: f32 = 0.02;
 impl Correlator {
     /// The sub-pixel position of the peak `found` (a result of [`Correlator::correlate`]
     /// searching `step`: `(1, 0)` along rows only, `(1, 1)` on both axes): by
-    /// least-squares matching ([`super::lsm`]) for a two-axis search, and where that
-    /// does not settle near `found` or the search ran along a row,
-    /// [`Correlator::correlate`] repeated on grids centred on the estimate.
+    /// least-squares matching ([`super::lsm`]) on the axes searched, and where that
+    /// does not settle near `found`, [`Correlator::correlate`] repeated on grids
+    /// centred on the estimate.
     ///
     /// The parabola is biased towards the sampled grid (pixel locking), and the grid is
     /// the search's start plus whole pixels: the estimate leans towards the start. For a
     /// tie point the start is the keypoint's own position, displaced along the image
-    /// motion, or the motion prediction. Least squares has no grid; re-centred, the
-    /// parabola's vertex is near its middle sample and less biased. Used for the
-    /// temporal correlations and for the measured stereo position of a rectified rig
-    /// ([`refine_checked`]). A pass that fails keeps the last estimate. The score and
-    /// the precision stay those of the correlation.
+    /// motion, or the motion prediction. Re-centred, the parabola's vertex is near its
+    /// middle sample, but it still leans by an amount of the texture's own, since the
+    /// peak is not a parabola (test
+    /// `a_rectified_rigs_stereo_match_does_not_lean_with_its_texture`). Least squares
+    /// has neither a grid nor a model of the peak. Used for the temporal correlations
+    /// and for the measured stereo position of a rectified rig ([`refine_checked`]). A
+    /// pass that fails keeps the last estimate. The score and the precision stay those
+    /// of the correlation.
     pub fn recentre(
         &mut self,
         tpl: &[f32; TEMPLATE_LEN],
@@ -349,12 +355,8 @@ impl Correlator {
         step: (usize, usize),
         min_ncc: f32,
     ) -> Peak {
-        // Along the rows (the stereo refinement of a rectified rig) least squares lost
-        // GNSS outages the re-centred parabola keeps: 18 of 31 met their bars, not 26.
-        if step.1 > 0 {
-            if let Some(at) = self.least_squares(tpl, h, img, found.at, step) {
-                return Peak { at, ..found };
-            }
+        if let Some(at) = self.least_squares(tpl, h, img, found.at, step) {
+            return Peak { at, ..found };
         }
         let mut peak = found;
         for _ in 0..RECENTRE_PASSES {
