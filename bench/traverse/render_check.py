@@ -19,10 +19,15 @@ axes, the pixels used and the RMS grey-level difference after the warp; then the
 steps, to compare with a run's summed rotation errors over the same stretch
 (`bench/aiding/attitude.py RUN --rotations A..B`).
 
+With `--scale`, the length of each step is solved beside its rotation: a last column, in %,
+for how much longer the step the images show is than the poses' (the camera's motion along
+its true direction); the steps of a run that fits the images would be that much longer.
+
     phototraverse synth --scene drive --seed 1 --frames 480 --depth --out D
     python3 bench/traverse/render_check.py D 405 455
+    python3 bench/traverse/render_check.py D 1 30 --scale
 
-usage: render_check.py DATASET FIRST LAST        (numpy, opencv-python; KITTI layout)
+usage: render_check.py DATASET FIRST LAST [--scale]   (numpy, opencv-python; KITTI layout)
 """
 import argparse
 import os
@@ -65,10 +70,11 @@ def carry(pose_a, pose_b, z, f, cx, cy):
     return u, v, xb[..., 2]
 
 
-def step_rotation(before, after, poses, k, f, cx, cy):
+def step_rotation(before, after, poses, k, f, cx, cy, scale=False):
     """The error (mrad, about x, y, z) of the poses' rotation from camera k-1 to k: minus the
     rotation of camera k that aligns image k onto image k-1 (`before` and `after`: their
-    frames)."""
+    frames); with `scale`, a fourth value: how much longer (%) the step the images show
+    is than the poses' step."""
     (ia, za), (ib, zb) = before, after
     u, v, zc = carry(poses[k - 1], poses[k], za, f, cx, cy)
     h, w = za.shape
@@ -82,11 +88,17 @@ def step_rotation(before, after, poses, k, f, cx, cy):
     gy = cv2.Sobel(warped, cv2.CV_64F, 0, 1, ksize=3) / 8
     ok &= np.hypot(gx, gy) > MIN_GRADIENT
     du, dv = image_motion((u - cx) / f, (v - cy) / f, zc, f)
-    # Only the rotation: the true depths carry the translation.
-    jac = (gx[..., None] * du[..., :3] + gy[..., None] * dv[..., :3])[ok]
+    # The rotation: the true depths carry the translation, which `scale` lengthens along
+    # camera k's true motion (in its own frame).
+    columns = [gx[..., None] * du[..., :3] + gy[..., None] * dv[..., :3]]
+    if scale:
+        move = poses[k][:3, :3].T @ (poses[k][:3, 3] - poses[k - 1][:3, 3])
+        columns.append((gx * (du[..., 3:] @ move) + gy * (dv[..., 3:] @ move))[..., None])
+    jac = np.concatenate(columns, -1)[ok]
     diff = (ia.astype(np.float64) - warped)[ok]
-    rot = -np.linalg.solve(jac.T @ jac, jac.T @ diff) * 1000
-    return rot, int(ok.sum()), float(np.sqrt(np.mean(diff ** 2)))
+    solution = np.linalg.solve(jac.T @ jac, jac.T @ diff)
+    found = np.concatenate([-solution[:3] * 1000, solution[3:] * 100])
+    return found, int(ok.sum()), float(np.sqrt(np.mean(diff ** 2)))
 
 
 def main():
@@ -94,6 +106,8 @@ def main():
     ap.add_argument("dataset", help="a `synth` dataset rendered with --depth (KITTI layout)")
     ap.add_argument("first", type=int, help="first epoch k of the steps k-1 -> k")
     ap.add_argument("last", type=int, help="last epoch (exclusive)")
+    ap.add_argument("--scale", action="store_true",
+                    help="also solve each step's length: %% longer in the images than in the poses")
     args = ap.parse_args()
     if not os.path.isdir(os.path.join(args.dataset, "depth_0")):
         sys.exit(f"{args.dataset}: no depth_0/ (render it with `synth --depth`)")
@@ -102,17 +116,21 @@ def main():
                  "cameras (a rig.toml layout's lens model is not modelled here)")
     poses = read_poses(os.path.join(args.dataset, "gt_poses.txt"))
     f, cx, cy, _ = rig(args.dataset)
-    total = np.zeros(3)
-    print("step      x mrad   y mrad   z mrad   pixels   grey RMS")
+    total = np.zeros(4 if args.scale else 3)
+    print("step      x mrad   y mrad   z mrad   pixels   grey RMS" + ("   scale %" if args.scale else ""))
     first = max(args.first, 1)
     after = frame(args.dataset, first - 1)
     for k in range(first, min(args.last, len(poses))):
         # Each frame is read once: this step's later frame is the next step's earlier one.
         before, after = after, frame(args.dataset, k)
-        rot, n, rms = step_rotation(before, after, poses, k, f, cx, cy)
-        total += rot
-        print(f"{k:5d}  {rot[0]:8.3f} {rot[1]:8.3f} {rot[2]:8.3f}  {n:7d}   {rms:6.2f}")
+        found, n, rms = step_rotation(before, after, poses, k, f, cx, cy, args.scale)
+        total += found
+        length = f"   {found[3]:+8.4f}" if args.scale else ""
+        print(f"{k:5d}  {found[0]:8.3f} {found[1]:8.3f} {found[2]:8.3f}  {n:7d}   {rms:6.2f}{length}")
     print(f"sum    {total[0]:8.3f} {total[1]:8.3f} {total[2]:8.3f}")
+    if args.scale:
+        steps = min(args.last, len(poses)) - first
+        print(f"mean scale {total[3] / max(steps, 1):+.4f} % per step")
 
 
 if __name__ == "__main__":
