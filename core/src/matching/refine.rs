@@ -63,7 +63,7 @@ const MIN_MISMATCH: f32 = 1e-4;
 /// texture's own, a disparity error the window takes for scale. The check still
 /// compares the single fits both ways, so which matches pass is unchanged; re-centring
 /// took 100 rendered epochs of `photo-curves` from 0.060 to 0.049 %, `hard` from 0.129
-/// to 0.102 %, and least squares the drift of four unseen draws' rectified streets to
+/// to 0.102 %, and least squares the drift of five unseen draws' rectified streets to
 /// 0.86..0.95 of that at 640x480 and 0.78..0.94 at 320x240 (`docs/traverse.md`). Off
 /// the rows (the general rig geometry's two-axis search: a converging rig,
 /// lens distortion, a calibration with a relative rotation) the re-centred position
