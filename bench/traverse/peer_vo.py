@@ -106,8 +106,6 @@ def read_rig(path):
         raise DatasetError(f"{path}: {e}")
 
 
-
-
 def distorted_pixels(cam, xc, yc):
     """Pixels (c, r) whose corrected photo-coordinates are (xc, yc) (mm, relative to the
     principal point). In the correction model (the default) x - dx(x) is inverted by

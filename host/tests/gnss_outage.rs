@@ -5,6 +5,7 @@
 //! the run states grow with the distance from the last fix.
 mod common;
 use common::ok;
+use phototraverse_core::adjust::wrap_angle;
 use phototraverse_core::camera::{pose_from_kitti, Pose};
 use phototraverse_host::poses::read_poses;
 use std::path::Path;
@@ -12,23 +13,16 @@ use std::path::Path;
 /// The outage, seconds: epochs 40 to 70 of the drive (2 m per epoch, 10 per second),
 /// 60 m through its first turn (radius 25 m, 100 to 139 m).
 const OUTAGE: (f64, f64) = (4.0, 7.0);
-/// Bounds, m. Measured here (main 4ce47a2): RMS 0.020 m outside; inside at most 0.117 m
-/// (the images alone, re-anchored to the truth where the outage starts: 0.225 m), 31 of
-/// 31 epochs within 3 sd; the speed within 0.92 % of the truth. The positions as the
-/// firmware output them, before the smoothing over all the fixes: 0.025 m outside,
-/// 0.117 m inside (`bench/aiding/outage.py`). Before the window let
-/// go of the fixed past on a fix, the RMS error with fixes at every epoch was over 1 m
-/// on the 1.2 km drive: the fixes could not pull the window off the drifted poses it
-/// held exact. With the smoothing's turn and scale of the images' steps inside the
-/// outage (main after 5f50bf5): 0.065 m inside, where a chain per coordinate left
-/// 0.117 m; RMS 0.019 m outside, 31 of 31 within 3 sd, the speed within 0.79 %. With
-/// least squares along the rows of the stereo match: 0.111 m inside (the images alone,
-/// re-anchored: 0.171 m; the firmware's own positions 0.179 m, 0.232 m before), RMS
-/// 0.020 m outside, 31 of 31, the speed within 0.74 %, 89 of 89 epochs' angles within
-/// 3 sd. On this drive the spread of the misclosure by a turn and
-/// a scale no longer beats a linear one (0.116 against 0.102 m, re-solved by
-/// `bench/aiding/turned_smoothing.py`); the smoothing's own tests tell the two apart.
-/// The bound keeps a margin below the 0.2 m an outage of 200 m may err by.
+/// Bounds, m. Measured here (main 911e22c): RMS 0.020 m outside; inside at most 0.111 m
+/// (the images alone, re-anchored to the truth where the outage starts: 0.171 m; the
+/// firmware's own positions, before the smoothing over all the fixes: 0.179 m), 31 of 31
+/// epochs within 3 sd; the speed within 0.74 %; 89 of 89 epochs' angles within 3 sd.
+/// Before the window let go of the fixed past on a fix, the RMS error with fixes at every
+/// epoch was over 1 m on the 1.2 km drive: the fixes could not pull the window off the
+/// drifted poses it held exact. The inside bound keeps a margin below the 0.2 m an
+/// outage of 200 m may err by; it does not tell the smoothing's turn and scale of the
+/// images' steps from a chain per coordinate on this drive (0.116 against 0.102 m,
+/// `bench/aiding/turned_smoothing.py`), which the smoothing's own tests do.
 const MAX_RMS_OUTSIDE_M: f64 = 0.03;
 const MAX_ERROR_INSIDE_M: f64 = 0.15;
 const MAX_SPEED_ERROR: f64 = 0.02;
@@ -207,7 +201,7 @@ impl Eop {
 /// whose pose `eop` gives), and the epochs with standard deviations. With fixes, the
 /// window's own covariance is an epoch's whole covariance: at the a-posteriori sigma0
 /// (about 0.2) it covered 40 of this drive's 89 epochs (main 7737ed2); at its a-priori
-/// value, 88.
+/// value, 88, and 89 with least squares along the row.
 fn angles_within_3_sd(ds: &Path, eop: &Eop) -> (usize, usize) {
     let truth = read_poses(&ds.join("gt_poses.txt")).unwrap();
     let angle = ["omega_deg", "phi_deg", "kappa_deg"].map(|c| eop.column(c));
@@ -224,7 +218,7 @@ fn angles_within_3_sd(ds: &Path, eop: &Eop) -> (usize, usize) {
         n += 1;
         let t = pose_from_kitti(&datum, gt);
         let within = [t.omega, t.phi, t.kappa].iter().enumerate().all(|(a, v)| {
-            let e = (row[angle[a]] - v.to_degrees() + 540.0) % 360.0 - 180.0;
+            let e = wrap_angle(row[angle[a]].to_radians() - v).to_degrees();
             e.abs() <= 3.0 * row[sd[a]]
         });
         covered += within as usize;

@@ -50,6 +50,7 @@ mod bias_tests;
 #[cfg(test)]
 mod tests;
 
+pub use constraints::wrap_angle;
 pub use geometry::InteriorCorrections;
 pub use intersection::{intersect, IntersectError, Intersection, Ray};
 pub use propagation::{right_camera_covariance, standard_deviations};
