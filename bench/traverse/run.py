@@ -162,12 +162,14 @@ def cpu_model():
     return platform.processor() or "unknown"
 
 
-def run_timed(cmd, log):
-    """Run cmd; returns (wall s, children's CPU s). Fails loudly with the log's tail."""
+def run_timed(cmd, log, env=None):
+    """Run cmd (with `env` added to the environment); returns (wall s, children's CPU s).
+    Fails loudly with the log's tail."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     with open(log, "w") as f:
-        rc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT).returncode
+        rc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT,
+                            env={**os.environ, **(env or {})}).returncode
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -490,6 +492,23 @@ cv2.setNumThreads(1)). Ratios are ours / peer: below 1, ours is better or faster
         f.write(text)
 
 
+def scenes_arg(ap, text):
+    """The scenes of a `--scenes` list (`all`, `all@320` expanded); an error names unknown ones."""
+    scenes = expand([s for s in text.split(",") if s])
+    unknown = [s for s in scenes if base(s) not in SCENES]
+    if unknown:
+        ap.error(f"unknown scene(s) {', '.join(unknown)}; known: {', '.join(SCENES)}")
+    return scenes
+
+
+def seeds_arg(ap, text):
+    """The seeds of a `--seeds` list; `[None]` (synth's own) without one."""
+    try:
+        return [int(x) for x in text.split(",") if x] if text else [None]
+    except ValueError:
+        ap.error(f"--seeds {text}: expected whole numbers separated by commas")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("cache", help="directory of synthesized scenes and runs (reused)")
@@ -511,10 +530,7 @@ def main():
     ap.add_argument("--results", default=os.path.join(HERE, "RESULTS.md"),
                     help="markdown file written with the table ('-' to skip)")
     args = ap.parse_args()
-    scenes = expand([s for s in args.scenes.split(",") if s])
-    unknown = [s for s in scenes if base(s) not in SCENES]
-    if unknown:
-        ap.error(f"unknown scene(s) {', '.join(unknown)}; known: {', '.join(SCENES)}")
+    scenes = scenes_arg(ap, args.scenes)
     photos = [s for s in scenes if "--photo-textures" in SCENES[base(s)]]
     missing = [f for f in PHOTOS.split(",") if not os.path.exists(f)]
     if photos and missing:
@@ -523,10 +539,7 @@ def main():
         ap.error(f"{args.bin}: no binary (cargo build --release -p phototraverse-host)")
     if args.baseline_bin and not os.access(args.baseline_bin, os.X_OK):
         ap.error(f"{args.baseline_bin}: not an executable")
-    try:
-        seeds = [int(x) for x in args.seeds.split(",") if x] if args.seeds else [None]
-    except ValueError:
-        ap.error(f"--seeds {args.seeds}: expected whole numbers separated by commas")
+    seeds = seeds_arg(ap, args.seeds)
     before = uptime()
     results = []
     for scene, seed in ((sc, sd) for sc in scenes for sd in seeds):

@@ -25,7 +25,6 @@ import argparse
 import json
 import math
 import os
-import subprocess
 import sys
 from collections import defaultdict
 
@@ -47,14 +46,9 @@ def parse_env(pairs, flag):
 def run_ours(binary, env, scene, ds, out):
     """One run of a build on a cached dataset, as `run.py` runs ours; its drift and the
     mean scale error per step."""
-    log = out + ".log"
     os.makedirs(os.path.dirname(out), exist_ok=True)
-    with open(log, "w") as f:
-        rc = subprocess.run([binary, "run", ds, "--out", out, "--link", "inproc", "--quiet",
-                             *bench.ours_args(scene)], stdout=f, stderr=subprocess.STDOUT,
-                            env={**os.environ, **env}).returncode
-    if rc != 0:
-        raise RuntimeError(f"{binary} run {ds} failed ({rc}), see {log}")
+    bench.run_timed([binary, "run", ds, "--out", out, "--link", "inproc", "--quiet",
+                     *bench.ours_args(scene)], out + ".log", env)
     poses = os.path.join(out, "poses.txt")
     ev = bench.evaluate(binary, ds, poses, out + "_eval.json", out + "_eval.log")
     scale = steps.summary(os.path.join(ds, "gt_poses.txt"), poses)["scale_pct"]["mean"]
@@ -89,11 +83,8 @@ def main():
     for b in (args.bin, baseline):
         if not os.access(b, os.X_OK):
             ap.error(f"{b}: not an executable")
-    scenes = bench.expand([s for s in args.scenes.split(",") if s])
-    unknown = [s for s in scenes if bench.base(s) not in bench.SCENES]
-    if unknown:
-        ap.error(f"unknown scene(s) {', '.join(unknown)}; known: {', '.join(bench.SCENES)}")
-    seeds = [int(x) for x in args.seeds.split(",") if x] if args.seeds else [None]
+    scenes = bench.scenes_arg(ap, args.scenes)
+    seeds = bench.seeds_arg(ap, args.seeds)
 
     rows, skipped = [], []
     for scene in scenes:

@@ -703,7 +703,7 @@ fn a_rectified_rigs_stereo_match_does_not_lean_with_its_texture() {
         });
         errors.sum::<f64>() / 10.0
     };
-    let leans: std::vec::Vec<f64> = (1..=8u64)
+    let leans: Vec<f64> = (1..=8u64)
         .flat_map(|seed| [0.5, 0.9].map(|band| lean(&random_waves(band, seed))))
         .collect();
     let rms = libm::sqrt(leans.iter().map(|l| l * l).sum::<f64>() / leans.len() as f64);
