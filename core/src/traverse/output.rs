@@ -26,7 +26,9 @@ pub mod flags {
     /// Informational: the resection failed and the motion prediction started the adjustment.
     pub const NO_RESECTION: u32 = 1 << 9;
     /// Informational: the tie points did not resect the camera; it was found again by a
-    /// resection on the previous stereo pair's points matched without the motion prior.
+    /// resection on the previous stereo pair's points that the temporal matching found
+    /// again, with or without the motion prior (in a small configuration, most epochs:
+    /// docs/traverse.md, "Relocalization").
     pub const RELOCALIZED: u32 = 1 << 10;
     /// Informational: the calibration check found the calibration significantly wrong
     /// and corrected it (the rig's relative orientation and the interior orientation).

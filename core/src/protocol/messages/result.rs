@@ -88,7 +88,7 @@ impl ResultFlags {
     /// Informational: the resection failed and the motion prediction started the adjustment.
     pub const NO_RESECTION: ResultFlags = ResultFlags(1 << 9);
     /// Informational: the camera was found again by a resection on the previous stereo
-    /// pair's points matched without the motion prior.
+    /// pair's points that the temporal matching found again (`docs/protocol.md`).
     pub const RELOCALIZED: ResultFlags = ResultFlags(1 << 10);
     /// Informational: the calibration check found the calibration significantly wrong
     /// and corrected it (the rig's relative orientation and the interior orientation).
