@@ -1,0 +1,59 @@
+#!/usr/bin/env python3
+"""The right image's rows against the left ones, over every stereo observation of a run.
+
+    python3 bench/traverse/stereo_rows.py RUN_DIR [RUN_DIR ...]
+
+Reads a `phototraverse run` output's `colmap/images.txt` (images in pairs: left, then the
+right image of the same epoch) and, for every point observed in both images of an epoch,
+takes the right row less the left one. On a rectified rig the truth is zero, so their mean
+is the stereo's vertical bias and their RMS its vertical noise. A rectified rig's stereo
+search puts the right point on the left one's row, so only a build that settles the match
+on both axes shows anything but zeros. Prints the count, mean, median and RMS, and the
+mean and RMS per quarter of the image's rows (top first).
+"""
+import sys
+
+import numpy as np
+
+
+def observations(path):
+    """{image id: {point id: (column, row)}} of a COLMAP images.txt."""
+    lines = [line for line in open(path) if not line.startswith("#")]
+    images = {}
+    for header, points in zip(lines[0::2], lines[1::2]):
+        values = points.split()
+        images[int(header.split()[0])] = {
+            int(values[k + 2]): (float(values[k]), float(values[k + 1])) for k in range(0, len(values) - 2, 3)
+        }
+    return images
+
+
+def main():
+    if len(sys.argv) < 2 or sys.argv[1] in ("-h", "--help"):
+        print(__doc__)
+        sys.exit(0 if len(sys.argv) > 1 else 2)
+    for run in sys.argv[1:]:
+        images = observations(f"{run}/colmap/images.txt")
+        rows, dy = [], []
+        for left_id, left in images.items():
+            right = images.get(left_id + 1) if left_id % 2 == 1 else None
+            for point, (_, row) in (left.items() if right else ()):
+                if point in right:
+                    rows.append(row)
+                    dy.append(right[point][1] - row)
+        rows, dy = np.array(rows), np.array(dy)
+        if not len(dy):
+            print(f"{run}: no point observed in both images of an epoch")
+            continue
+        print(f"{run}: {len(dy)} observations, right row less left: mean {dy.mean():+.4f} px, "
+              f"median {np.median(dy):+.4f}, RMS {np.sqrt(np.mean(dy ** 2)):.4f}")
+        edges = np.linspace(0, rows.max() + 1e-9, 5)
+        for q in range(4):
+            sel = (rows >= edges[q]) & (rows < edges[q + 1])
+            if sel.any():
+                print(f"  rows {edges[q]:5.0f} to {edges[q + 1]:5.0f}: {sel.sum():6d}, mean {dy[sel].mean():+.4f}, "
+                      f"RMS {np.sqrt(np.mean(dy[sel] ** 2)):.4f}")
+
+
+if __name__ == "__main__":
+    main()
