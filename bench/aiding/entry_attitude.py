@@ -33,7 +33,6 @@ import turned_smoothing
 # KITTI's camera frame (x right, y down, z forward) into the object frame of the datum
 # (X right, Y forward, Z up), for a datum at omega 90 deg as `synth`'s KITTI layout has it.
 KITTI_TO_OBJECT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
-RUN_SIGMAS = argparse.Namespace(step_sd=3.7e-3, turn_sd=1.5e-3, turn_walk=2e-3, scale_sd=1e-3, scale_walk=1e-4)
 
 
 def entry_error(run_dir, epochs, first, part):
@@ -69,7 +68,7 @@ def main():
             if turned[k].get("step_m") is not None:
                 turned[k]["step_m"] = list(turn @ np.array(turned[k]["step_m"]))
         largest = [
-            np.linalg.norm(turned_smoothing.smooth(ep, inside, RUN_SIGMAS) - truth, axis=1)[inside].max()
+            np.linalg.norm(turned_smoothing.smooth(ep, inside, turned_smoothing.RUN_SIGMAS) - truth, axis=1)[inside].max()
             for ep in (epochs, turned)
         ]
         bound = turned_smoothing.images_only_largest(f"{args.root}/i{seed}", inside)

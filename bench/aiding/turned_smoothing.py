@@ -11,7 +11,8 @@ It solves the fixes and steps (`step_m` of report.json) jointly over the three
 coordinates, with, for the epochs inside the outage, a small rotation `t` (3 angles) and a
 scale `l` of the steps as unknowns, each a random walk from the outage's first epoch:
 
-    C_k - C_(k-1) = s_k + s_k x t_k + l_k s_k      (s_k the step; sd `--step-sd`)
+    C_k - C_(k-1) = s_k + s_k x t_k + l_k s_k      (s_k the step; sd `--step-sd`, inside
+                                                    at least `--outage-step` of |s_k|)
     t_k - t_(k-1) = 0 (sd `--turn-walk`),  l_k - l_(k-1) = 0 (sd `--scale-walk`)
     t_first = 0 (sd `--turn-sd`),  l_first = 0 (sd `--scale-sd`)
 
@@ -26,7 +27,8 @@ each meets the two bars of `outage.py` (at most 0.2 m, and no larger than the im
 re-anchored to the truth at the outage's first epoch). The defaults are `run`'s sigmas.
 
 usage: turned_smoothing.py AIDED_DIR START_S END_S [--images IMAGES_ONLY_DIR]
-       [--step-sd M] [--turn-sd RAD] [--turn-walk RAD] [--scale-sd S] [--scale-walk S]
+       [--step-sd M] [--outage-step R] [--turn-sd RAD] [--turn-walk RAD] [--scale-sd S]
+       [--scale-walk S]
 """
 import argparse
 
@@ -81,6 +83,8 @@ def smooth(epochs, inside, args):
             sd *= 10.0
         s = np.array(s)
         j = k - first if first <= k <= inside[-1] else None
+        if j is not None:  # the images' own step error, which no fix holds inside
+            sd = max(sd, args.outage_step * np.linalg.norm(s))
         x = cross_matrix(s)
         for c in range(3):
             terms = [(3 * k + c, 1.0), (3 * (k - 1) + c, -1.0)]
@@ -98,6 +102,18 @@ def smooth(epochs, inside, args):
     return eq.solve(3 * n + 4 * m)[: 3 * n].reshape(n, 3)
 
 
+# The model's sigmas as `run` has them (host/src/smoothing.rs), with the option of each.
+OPTIONS = [
+    ("--step-sd", 3.7e-3, "m (run's estimate between fixes: 3.7 to 3.9 mm)"),
+    ("--outage-step", 5e-3, "the least sd of a step inside the outage, of its length"),
+    ("--turn-sd", 1.5e-3, "rad, at the outage's entry"),
+    ("--turn-walk", 4e-4, "rad per step"),
+    ("--scale-sd", 1e-3, "at the outage's entry"),
+    ("--scale-walk", 1e-4, "per step"),
+]
+RUN_SIGMAS = argparse.Namespace(**{flag[2:].replace("-", "_"): default for flag, default, _ in OPTIONS})
+
+
 def images_only_largest(images_dir, inside):
     """The images-only run's largest error inside, re-anchored at the outage's first epoch."""
     offsets = outage.reanchored_offsets(images_dir, inside[0])
@@ -110,11 +126,8 @@ def main():
     p.add_argument("start_s", type=float)
     p.add_argument("end_s", type=float)
     p.add_argument("--images", help="images-only run of the same dataset, for the bars")
-    p.add_argument("--step-sd", type=float, default=3.7e-3, help="m (run's estimate: 3.7 to 3.9 mm)")
-    p.add_argument("--turn-sd", type=float, default=1.5e-3, help="rad, at the outage's entry")
-    p.add_argument("--turn-walk", type=float, default=2e-3, help="rad per step")
-    p.add_argument("--scale-sd", type=float, default=1e-3, help="at the outage's entry")
-    p.add_argument("--scale-walk", type=float, default=1e-4, help="per step")
+    for flag, default, text in OPTIONS:
+        p.add_argument(flag, type=float, default=default, help=text)
     args = p.parse_args()
     epochs, truth = outage.load(args.aided)
     inside = [i for i, e in enumerate(epochs) if args.start_s <= e["time"] <= args.end_s]
