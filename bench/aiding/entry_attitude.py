@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
 """What an outage's error owes to the attitude the aided run enters it with: the outages of
-a directory of runs re-smoothed (`turned_smoothing.py`'s model, `run`'s sigmas) with the
+a directory of runs re-smoothed (`turned_smoothing.py`'s model, `run`'s sigmas unless given) with the
 steps inside turned by the true attitude error at the outage's first epoch, whole or in
 part, against the images alone re-anchored there (`outage.py`'s second bar).
 
-    python3 bench/aiding/entry_attitude.py ROOT [--part all|level|roll]
+    python3 bench/aiding/entry_attitude.py ROOT [--part all|level|roll] [the model's sigmas]
 
 ROOT holds aided runs `o<seed>-<start>..<end>` (an outage of START..END s) and, for each
 seed, the images-only run `i<seed>`, as the runs of `bench/aiding/README.md` are named.
@@ -53,6 +53,8 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("root", help="directory of o<seed>-<a>..<b> and i<seed> runs")
     p.add_argument("--part", choices=("all", "level", "roll"), default="all")
+    for flag, default, text in turned_smoothing.OPTIONS:
+        p.add_argument(flag, type=float, default=default, help=f"{text} (the model's, as turned_smoothing.py)")
     args = p.parse_args()
     rows = []
     for run_dir in sorted(glob.glob(f"{args.root}/o*")):
@@ -68,7 +70,7 @@ def main():
             if turned[k].get("step_m") is not None:
                 turned[k]["step_m"] = list(turn @ np.array(turned[k]["step_m"]))
         largest = [
-            np.linalg.norm(turned_smoothing.smooth(ep, inside, turned_smoothing.RUN_SIGMAS) - truth, axis=1)[inside].max()
+            np.linalg.norm(turned_smoothing.smooth(ep, inside, args) - truth, axis=1)[inside].max()
             for ep in (epochs, turned)
         ]
         bound = turned_smoothing.images_only_largest(f"{args.root}/i{seed}", inside)

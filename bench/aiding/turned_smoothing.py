@@ -111,7 +111,6 @@ OPTIONS = [
     ("--scale-sd", 1e-3, "at the outage's entry"),
     ("--scale-walk", 1e-4, "per step"),
 ]
-RUN_SIGMAS = argparse.Namespace(**{flag[2:].replace("-", "_"): default for flag, default, _ in OPTIONS})
 
 
 def images_only_largest(images_dir, inside):

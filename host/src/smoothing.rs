@@ -70,9 +70,11 @@ const DIFFUSE_M2: f64 = 1e8;
 pub const TURN_SD_RAD: f64 = 1.5e-3;
 /// Its random walk per step, rad: about twice the walk of the images' attitude in the
 /// rendered drives' turns (0.14 mrad per root epoch in heading, 0.21 in pitch; on the
-/// straights 0.075 and 0.094). A walk of 0.1 or 0.2 mrad left outages under 90 % of their
-/// epochs within 3 sd, unless the steps' own variance grows inside (below); 2 mrad, which
-/// stood in for that variance, spread the misclosure worse (`bench/aiding/README.md`).
+/// straights 0.075 and 0.094). With the steps' variance at `q`, a walk of 0.1 mrad left
+/// a third of the rendered drives' outages under 90 % of their epochs within 3 sd; with
+/// the steps' own variance inside (below), 0.2 mrad still left one at 86 %. A walk of
+/// 2 mrad, which stood in for that variance, spread the misclosure worse
+/// (`bench/aiding/README.md`).
 pub const TURN_WALK_RAD: f64 = 4e-4;
 /// The white error of a step into an epoch without a fix, per coordinate, relative to
 /// the step's length, at the least. Between fixes the aided window's steps agree with
