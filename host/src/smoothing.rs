@@ -720,17 +720,10 @@ mod tests {
     #[test]
     fn noisy_fixes_are_averaged_through_the_steps_and_the_step_precision_is_estimated() {
         let mut rng = rand::rngs::StdRng::seed_from_u64(7);
-        let fix_noise: Vec<[f64; 3]> = (0..400)
-            .map(|_| [0; 3].map(|_: i32| 0.01 * gauss(&mut rng)))
-            .collect();
-        let step_noise: Vec<[f64; 3]> = (0..400)
-            .map(|_| [0; 3].map(|_: i32| 0.005 * gauss(&mut rng)))
-            .collect();
-        let (mut records, truth) = drive(
-            400,
-            |k| Some([0, 1, 2].map(|c| [0.0, 2.0 * k as f64, 0.0][c] + fix_noise[k][c])),
-            |k| step_noise[k],
-        );
+        let fix_noise = noise(&mut rng, 400, |_| 0.01);
+        let step_noise = noise(&mut rng, 400, |_| 0.005);
+        let (mut records, truth) =
+            drive(400, |k| Some(on_line(k, fix_noise[k])), |k| step_noise[k]);
         let summary = smooth_over_fixes(&mut records, [0.0; 3], &ONE_PLACE).unwrap();
         // Estimated within 15 % of the 5 mm the steps were drawn with (the steps'
         // redundancy, about 300 here, makes that about 4 % one sigma).
@@ -749,14 +742,7 @@ mod tests {
         let covered = records
             .iter()
             .zip(&truth)
-            .filter(|(r, t)| {
-                let s = r.left.sigma.unwrap();
-                [r.left.x, r.left.y, r.left.z]
-                    .iter()
-                    .zip(t.iter())
-                    .zip(&s[3..])
-                    .all(|((x, t), s)| (x - t).abs() <= 3.0 * s)
-            })
+            .filter(|(r, t)| within_3_sd(r, **t))
             .count();
         assert!(covered >= 380, "{covered} of 400 within 3 sd");
         // The fixes' residuals are against the smoothed positions.
@@ -774,37 +760,44 @@ mod tests {
         // priors took up most of it, but 93 were.
         let mut rng = rand::rngs::StdRng::seed_from_u64(11);
         let outage = |k: usize| k >= 20 && k % 30 >= 20;
-        let step_noise: Vec<[f64; 3]> = (0..300)
-            .map(|k| {
-                let sd = if outage(k) { 0.01 } else { 0.002 };
-                [0; 3].map(|_: i32| sd * gauss(&mut rng))
-            })
-            .collect();
-        let fix_noise: Vec<[f64; 3]> = (0..300)
-            .map(|_| [0; 3].map(|_: i32| 0.01 * gauss(&mut rng)))
-            .collect();
+        let step_noise = noise(&mut rng, 300, |k| if outage(k) { 0.01 } else { 0.002 });
+        let fix_noise = noise(&mut rng, 300, |_| 0.01);
         let (mut records, truth) = drive(
             300,
-            |k| {
-                (!outage(k))
-                    .then(|| [0, 1, 2].map(|c| [0.0, 2.0 * k as f64, 0.0][c] + fix_noise[k][c]))
-            },
+            |k| (!outage(k)).then(|| on_line(k, fix_noise[k])),
             |k| step_noise[k],
         );
         smooth_over_fixes(&mut records, [0.0; 3], &ONE_PLACE).unwrap();
-        let inside: Vec<usize> = (0..300).filter(|&k| outage(k)).collect();
-        let covered = inside
-            .iter()
-            .filter(|&&k| {
-                let (r, s) = (&records[k], records[k].left.sigma.unwrap());
-                [r.left.x, r.left.y, r.left.z]
-                    .iter()
-                    .zip(truth[k].iter())
-                    .zip(&s[3..])
-                    .all(|((x, t), s)| (x - t).abs() <= 3.0 * s)
-            })
+        let covered = (0..300)
+            .filter(|&k| outage(k) && within_3_sd(&records[k], truth[k]))
             .count();
         assert!(covered >= 97, "{covered} of 100 outage epochs within 3 sd");
+    }
+
+    /// Normal errors on three coordinates for each of `n` epochs, of sd `sd(k)`.
+    fn noise(rng: &mut impl Rng, n: usize, sd: impl Fn(usize) -> f64) -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|k| {
+                let sd = sd(k);
+                [0; 3].map(|_: i32| sd * gauss(rng))
+            })
+            .collect()
+    }
+
+    /// The point of [`drive`]'s line at epoch `k`, moved by `error`.
+    fn on_line(k: usize, error: [f64; 3]) -> [f64; 3] {
+        [error[0], 2.0 * k as f64 + error[1], error[2]]
+    }
+
+    /// Whether the record's centre is within 3 of its standard deviations of `truth` on
+    /// every coordinate.
+    fn within_3_sd(r: &EpochRecord, truth: [f64; 3]) -> bool {
+        let s = r.left.sigma.unwrap();
+        [r.left.x, r.left.y, r.left.z]
+            .iter()
+            .zip(truth.iter())
+            .zip(&s[3..])
+            .all(|((x, t), s)| (x - t).abs() <= 3.0 * s)
     }
 
     fn gauss(rng: &mut impl Rng) -> f64 {
