@@ -4,44 +4,32 @@
     python3 bench/aiding/attitude_walk.py RUN_DIR [RUN_DIR ...] [--lags 10,20]
 
 For every run (a `phototraverse run` output with `report.json`, whose dataset has
-`gt_poses.txt`), at every fifth epoch k from the 20th: the attitude error E_k = R_est R_true^T
-(the world frame), its change from k to k + LAG as a rotation vector, split along the true
-direction of travel at k (levelled), across it and about the vertical: roll, pitch and
-heading. A stretch is straight when the true heading turns by less than 0.5 mrad per epoch
+`gt_poses.txt`), at every fifth epoch k from the 20th: the attitude error (`attitude.py`'s,
+in the world frame), its change from k to k + LAG as a rotation vector, split as
+`attitude.py` splits it, along the true direction of travel at k, level across it and about
+the vertical: roll, pitch and heading. A stretch is straight when the true heading turns by less than 0.5 mrad per epoch
 over it. Prints the RMS change per part and per root epoch: a random walk's rate, which is
 the same at every lag. An aided run's attitude at an outage's entry can be no better than
 the fixes allow against this walk (`README.md`, "What the entry's attitude costs").
 """
 import argparse
-import json
 import math
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-import outage
-
-
-def heading(pose):
-    return math.atan2(pose[0, 2], pose[2, 2])
+import attitude  # the runs' poses against the truth, the error rotations, the travel axes
 
 
 def changes(run_dir, lag):
     """(straight?, [roll, pitch, heading] change in rad) of every sampled stretch of a run."""
-    dataset = json.load(open(f"{run_dir}/report.json"))["dataset"]
-    truth = outage.kitti(f"{dataset}/gt_poses.txt")
-    est = outage.kitti(f"{run_dir}/poses.txt")
-    down = np.array([0.0, 1.0, 0.0])  # KITTI's y
+    truth, est = attitude.load(run_dir, None)
+    err = [Rotation.from_rotvec(e / 1000) for e in attitude.errors(truth, est)]
     out = []
     for k in range(20, min(len(truth), len(est)) - lag, 5):
-        e0 = est[k][:3, :3] @ truth[k][:3, :3].T
-        e1 = est[k + lag][:3, :3] @ truth[k + lag][:3, :3].T
-        change = Rotation.from_matrix(e1 @ e0.T).as_rotvec()
-        across = np.cross(down, truth[k][:3, 2])
-        across /= np.linalg.norm(across)
-        along = np.cross(across, down)
-        turn = abs((heading(truth[k + lag]) - heading(truth[k]) + math.pi) % (2 * math.pi) - math.pi)
-        out.append((turn < 5e-4 * lag, [change @ along, change @ across, change @ down]))
+        change = (err[k + lag] * err[k].inv()).as_rotvec()
+        turn = abs((attitude.heading_deg(truth, k + lag) - attitude.heading_deg(truth, k) + 180) % 360 - 180)
+        out.append((math.radians(turn) < 5e-4 * lag, attitude.split(change, attitude.travel_axes(truth, k))))
     return out
 
 

@@ -9,10 +9,11 @@ part, against the images alone re-anchored there (`outage.py`'s second bar).
 ROOT holds aided runs `o<seed>-<start>..<end>` (an outage of START..END s) and, for each
 seed, the images-only run `i<seed>`, as the runs of `bench/aiding/README.md` are named.
 The attitude error is the truth's rotation against the run's `poses.txt` at the entry (the
-aided window's attitude there, which the images' steps inside the outage carry), put into
-the object frame. `--part roll` keeps only its component about the direction of travel at
-the entry (the mean step of the 5 epochs before it), which the fixes on a straight do not
-observe; `--part level` keeps the rest (heading and pitch), which they do; `all` both.
+aided window's attitude there, which the images' steps inside the outage carry;
+`attitude.py`'s), put into the object frame. `--part roll` keeps only its component about
+the true direction of travel at the entry (`attitude.py`'s axes), which the fixes on a
+straight do not observe; `--part level` keeps the rest (heading and pitch), which they do;
+`all` both.
 
 Prints, per outage, the largest position error inside with `run`'s smoothing and with the
 steps turned, the images alone's, and the entry's attitude error; then how many outages
@@ -20,33 +21,30 @@ meet both bars (at most 0.2 m, no larger than the images alone) each way and the
 """
 import argparse
 import glob
-import json
 import os
 import re
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+import attitude
 import outage
 import turned_smoothing
-
-# KITTI's camera frame (x right, y down, z forward) into the object frame of the datum
-# (X right, Y forward, Z up), for a datum at omega 90 deg as `synth`'s KITTI layout has it.
-KITTI_TO_OBJECT = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+from pose_graph import rigid_fit
 
 
-def entry_error(run_dir, epochs, first, part):
+def entry_error(run_dir, truth_object, first, part):
     """The rotation (object frame) that turns the run's attitude at `first` onto the truth,
-    whole or the part `part` of it."""
-    dataset = json.load(open(f"{run_dir}/report.json"))["dataset"]
-    truth = outage.kitti(f"{dataset}/gt_poses.txt")[first][:3, :3]
-    est = outage.kitti(f"{run_dir}/poses.txt")[first][:3, :3]
-    rv = Rotation.from_matrix(KITTI_TO_OBJECT @ truth @ est.T @ KITTI_TO_OBJECT.T).as_rotvec()
-    travel = sum(np.array(epochs[k]["step_m"]) for k in range(max(1, first - 5), first + 1) if epochs[k].get("step_m"))
-    travel = travel / np.linalg.norm(travel)
-    roll = travel * (rv @ travel)
+    whole or the part `part` of it; `truth_object` the true centres in the object frame."""
+    truth, est = attitude.load(run_dir, None)
+    rv = attitude.errors(truth[first : first + 1], est[first : first + 1])[0] / 1000
+    along = attitude.travel_axes(truth, first)[0]
+    roll = along * (rv @ along)
     part_rv = {"all": rv, "roll": roll, "level": rv - roll}[part]
-    return Rotation.from_rotvec(part_rv).as_matrix(), np.linalg.norm(rv)
+    # The object frame from the KITTI one: the truth is in both.
+    to_kitti, _ = rigid_fit(truth_object, truth[:, :, 3])
+    turn = to_kitti.T @ Rotation.from_rotvec(part_rv).as_matrix() @ to_kitti
+    return turn, np.linalg.norm(rv)
 
 
 def main():
@@ -64,7 +62,7 @@ def main():
         seed, t0, t1 = m.group(1), float(m.group(2)), float(m.group(3))
         epochs, truth = outage.load(run_dir)
         inside = [i for i, e in enumerate(epochs) if t0 <= e["time"] <= t1]
-        turn, size = entry_error(run_dir, epochs, inside[0], args.part)
+        turn, size = entry_error(run_dir, truth, inside[0], args.part)
         turned = [dict(e) for e in epochs]
         for k in inside:
             if turned[k].get("step_m") is not None:

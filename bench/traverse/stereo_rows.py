@@ -3,8 +3,8 @@
 
     python3 bench/traverse/stereo_rows.py RUN_DIR [RUN_DIR ...]
 
-Reads a `phototraverse run` output's `colmap/images.txt` (images in pairs: left, then the
-right image of the same epoch) and, for every point observed in both images of an epoch,
+Reads a `phototraverse run` output's `colmap/images.txt` (`precision.py`'s reader; images
+in pairs: left, then the right image of the same epoch) and, for every point observed in both images of an epoch,
 takes the right row less the left one. On a rectified rig the truth is zero, so their mean
 is the stereo's vertical bias and their RMS its vertical noise. A rectified rig's stereo
 search puts the right point on the left one's row, so only a build that settles the match
@@ -15,17 +15,7 @@ import sys
 
 import numpy as np
 
-
-def observations(path):
-    """{image id: {point id: (column, row)}} of a COLMAP images.txt."""
-    lines = [line for line in open(path) if not line.startswith("#")]
-    images = {}
-    for header, points in zip(lines[0::2], lines[1::2]):
-        values = points.split()
-        images[int(header.split()[0])] = {
-            int(values[k + 2]): (float(values[k]), float(values[k + 1])) for k in range(0, len(values) - 2, 3)
-        }
-    return images
+from precision import read_model  # the runs' COLMAP images, by image id
 
 
 def main():
@@ -33,11 +23,11 @@ def main():
         print(__doc__)
         sys.exit(0 if len(sys.argv) > 1 else 2)
     for run in sys.argv[1:]:
-        images = observations(f"{run}/colmap/images.txt")
+        images = read_model(run)
         rows, dy = [], []
-        for left_id, left in images.items():
-            right = images.get(left_id + 1) if left_id % 2 == 1 else None
-            for point, (_, row) in (left.items() if right else ()):
+        for k in range(len(images) // 2):
+            left, right = images.get(2 * k + 1, {}), images.get(2 * k + 2, {})
+            for point, (_, row) in left.items():
                 if point in right:
                     rows.append(row)
                     dy.append(right[point][1] - row)
