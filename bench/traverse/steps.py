@@ -11,7 +11,12 @@ scale = |t_est| / |t_gt| - 1 (in %), E's translation per metre travelled (x, y, 
 rotation vector (about x = pitch, y = yaw, z = roll) in millidegrees per step; mean and standard
 deviation over the steps.
 
-usage: steps.py GT EST [EST ...]
+With `--yaw`, also each rotation error regressed on the step's true yaw (slope in % of
+the yaw, with its standard error): a rotation whose axis is tilted against the true one
+shows as a pitch or roll error in proportion to the turn, which the means above average
+away over turns of both senses.
+
+usage: steps.py GT EST [EST ...] [--yaw]
 """
 import sys
 
@@ -40,6 +45,27 @@ def rotation_vector(R):
     if s < 1e-15:
         return 0.5 * w  # small-angle limit
     return w / s * angle
+
+
+def true_rotations(gt):
+    """The true step rotations as rotation vectors (radians; x, y, z as in step_errors)."""
+    return np.array([rotation_vector((np.linalg.inv(gt[k - 1]) @ gt[k])[:3, :3])
+                     for k in range(1, len(gt))])
+
+
+def yaw_slopes(gt, est):
+    """Per rotation axis: slope (in % of the true yaw) and its standard error of the steps'
+    rotation errors regressed on the steps' true yaw, with an intercept."""
+    _, _, rot = step_errors(gt, est)
+    yaw = np.degrees(true_rotations(gt)[:, 1]) * 1e3  # mdeg, as the errors
+    design = np.vstack([yaw, np.ones_like(yaw)]).T
+    out = []
+    for axis in range(3):
+        coef, *_ = np.linalg.lstsq(design, rot[:, axis], rcond=None)
+        resid = rot[:, axis] - design @ coef
+        var = resid @ resid / (len(yaw) - 2) * np.linalg.inv(design.T @ design)
+        out.append((coef[0] * 100.0, np.sqrt(var[0, 0]) * 100.0))
+    return out
 
 
 def step_errors(gt, est):
@@ -81,11 +107,16 @@ def describe(name, s):
 
 
 def main():
-    if len(sys.argv) < 3:
+    args = [a for a in sys.argv[1:] if a != "--yaw"]
+    if len(args) < 2:
         print(__doc__, file=sys.stderr)
         return 2
-    for est in sys.argv[2:]:
-        print(describe(est, summary(sys.argv[1], est)))
+    for est in args[1:]:
+        print(describe(est, summary(args[0], est)))
+        if "--yaw" in sys.argv:
+            slopes = yaw_slopes(read_poses(args[0]), read_poses(est))
+            print("  against the true yaw: " + ", ".join(
+                f"{name} {m:+.3f} % ({se:.3f})" for name, (m, se) in zip(("pitch", "yaw", "roll"), slopes)))
     return 0
 
 
