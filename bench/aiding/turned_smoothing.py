@@ -13,7 +13,9 @@ scale `l` of the steps as unknowns, each a random walk from the outage's first e
 
     C_k - C_(k-1) = s_k + s_k x t_k + l_k s_k      (s_k the step; sd `--step-sd`, inside
                                                     at least `--outage-step` of |s_k|)
-    t_k - t_(k-1) = 0 (sd `--turn-walk`),  l_k - l_(k-1) = 0 (sd `--scale-walk`)
+    t_k - t_(k-1) = 0 (sd `--turn-walk`, with `--turn-walk-per-rad` times the angle
+                       the images turn by into epoch k added in quadrature),
+    l_k - l_(k-1) = 0 (sd `--scale-walk`)
     t_first = 0 (sd `--turn-sd`),  l_first = 0 (sd `--scale-sd`)
 
 so that a misclosure is spread the way an attitude error and a scale error of the images
@@ -31,12 +33,17 @@ usage: turned_smoothing.py AIDED_DIR START_S END_S [--images IMAGES_ONLY_DIR]
        [--scale-walk S]
 """
 import argparse
+import os
+import sys
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spl
 
 import outage
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "traverse"))
+from photogrammetry import rotation  # noqa: E402  (the shared conventions)
 
 
 def cross_matrix(s):
@@ -95,11 +102,21 @@ def smooth(epochs, inside, args):
     for a in range(3):
         eq.add([(turn + a, 1.0)], 0.0, args.turn_sd)
     eq.add([(scale, 1.0)], 0.0, args.scale_sd)
+    turned = step_turns(epochs)
     for j in range(1, m):
+        walk = np.hypot(args.turn_walk, args.turn_walk_per_rad * turned[first + j])
         for a in range(3):
-            eq.add([(turn + 3 * j + a, 1.0), (turn + 3 * (j - 1) + a, -1.0)], 0.0, args.turn_walk)
+            eq.add([(turn + 3 * j + a, 1.0), (turn + 3 * (j - 1) + a, -1.0)], 0.0, walk)
         eq.add([(scale + j, 1.0), (scale + j - 1, -1.0)], 0.0, args.scale_walk)
     return eq.solve(3 * n + 4 * m)[: 3 * n].reshape(n, 3)
+
+
+def step_turns(epochs):
+    """The angle (rad) the images turn by into each epoch (0 for the first)."""
+    r = [rotation(*np.radians([e["left"][k] for k in ("omega_deg", "phi_deg", "kappa_deg")]))
+         for e in epochs]
+    cosines = [(np.trace(a @ b.T) - 1.0) / 2.0 for a, b in zip(r, r[1:])]
+    return np.concatenate([[0.0], np.arccos(np.clip(cosines, -1.0, 1.0))])
 
 
 # The model's sigmas as `run` has them (host/src/smoothing.rs), with the option of each.
@@ -108,6 +125,7 @@ OPTIONS = [
     ("--outage-step", 5e-3, "the least sd of a step inside the outage, of its length"),
     ("--turn-sd", 1.5e-3, "rad, at the outage's entry"),
     ("--turn-walk", 4e-4, "rad per step"),
+    ("--turn-walk-per-rad", 0.0, "rad per step and per rad the images turn by in it (not run's)"),
     ("--scale-sd", 1e-3, "at the outage's entry"),
     ("--scale-walk", 1e-4, "per step"),
 ]
