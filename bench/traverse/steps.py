@@ -24,6 +24,7 @@ away over turns of both senses.
 
 usage: steps.py GT EST [EST ...] [--yaw] [--unbiased OUT]
 """
+import argparse
 import sys
 
 import numpy as np
@@ -148,22 +149,20 @@ def describe(name, s):
 
 
 def main():
-    argv = sys.argv[1:]
-    out = None
-    if "--unbiased" in argv:
-        i = argv.index("--unbiased")
-        out = argv[i + 1] if i + 1 < len(argv) else None
-        argv = argv[:i] + argv[i + 2:]
-    args = [a for a in argv if a != "--yaw"]
-    if len(args) < 2 or ("--unbiased" in sys.argv and (out is None or len(args) != 2)):
-        print(__doc__, file=sys.stderr)
-        return 2
-    if out:
-        write_poses(out, unbiased(read_poses(args[0]), read_poses(args[1])))
-    for est in args[1:]:
-        print(describe(est, summary(args[0], est)))
-        if "--yaw" in sys.argv:
-            slopes = yaw_slopes(read_poses(args[0]), read_poses(est))
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("gt", help="ground-truth poses (KITTI)")
+    p.add_argument("est", nargs="+", help="estimated poses (KITTI)")
+    p.add_argument("--yaw", action="store_true", help="each rotation error's slope against the true yaw")
+    p.add_argument("--unbiased", metavar="OUT", help="write EST without its mean step error (one EST)")
+    args = p.parse_args()
+    if args.unbiased:
+        if len(args.est) != 1:
+            p.error("--unbiased takes one EST")
+        write_poses(args.unbiased, unbiased(read_poses(args.gt), read_poses(args.est[0])))
+    for est in args.est:
+        print(describe(est, summary(args.gt, est)))
+        if args.yaw:
+            slopes = yaw_slopes(read_poses(args.gt), read_poses(est))
             print("  against the true yaw: " + ", ".join(
                 f"{name} {m:+.3f} % ({se:.3f})" for name, (m, se) in zip(("pitch", "yaw", "roll"), slopes)))
     return 0
