@@ -44,6 +44,7 @@ import outage
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "traverse"))
 from photogrammetry import rotation  # noqa: E402  (the shared conventions)
+from steps import rotation_vector  # noqa: E402
 
 
 def cross_matrix(s):
@@ -115,8 +116,7 @@ def step_turns(epochs):
     """The angle (rad) the images turn by into each epoch (0 for the first)."""
     r = [rotation(*np.radians([e["left"][k] for k in ("omega_deg", "phi_deg", "kappa_deg")]))
          for e in epochs]
-    cosines = [(np.trace(a @ b.T) - 1.0) / 2.0 for a, b in zip(r, r[1:])]
-    return np.concatenate([[0.0], np.arccos(np.clip(cosines, -1.0, 1.0))])
+    return np.array([0.0] + [np.linalg.norm(rotation_vector(b @ a.T)) for a, b in zip(r, r[1:])])
 
 
 # The model's sigmas as `run` has them (host/src/smoothing.rs), with the option of each.

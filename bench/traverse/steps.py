@@ -64,12 +64,28 @@ def rotation_matrix(v):
     return np.eye(3) + np.sin(angle) * kx + (1.0 - np.cos(angle)) * kx @ kx
 
 
+def step_pairs(gt, est):
+    """Per step k-1 -> k: the true relative motion rel_gt, the estimated one rel_est and the
+    error E = inv(rel_gt) rel_est (4x4 each)."""
+    if len(gt) != len(est):
+        raise ValueError(f"{len(gt)} ground-truth poses, {len(est)} estimated")
+    for k in range(1, len(gt)):
+        rg = np.linalg.inv(gt[k - 1]) @ gt[k]
+        re = np.linalg.inv(est[k - 1]) @ est[k]
+        yield rg, re, np.linalg.inv(rg) @ re
+
+
+def moving(d):
+    """Whether a true step of length d (m) moves: standing still has no scale to speak of."""
+    return d >= 1e-6
+
+
 def unbiased(gt, est):
     """The poses of `est` with the mean step error taken out of every step (rotation vector
     per step, translation per metre of the true step), chained from est's first pose."""
-    rel_gt = [np.linalg.inv(gt[k - 1]) @ gt[k] for k in range(1, len(gt))]
-    errors = [np.linalg.inv(rg) @ (np.linalg.inv(est[k]) @ est[k + 1])
-              for k, rg in enumerate(rel_gt)]
+    pairs = list(step_pairs(gt, est))
+    rel_gt = [rg for rg, _, _ in pairs]
+    errors = [e for _, _, e in pairs]
     lengths = np.array([max(np.linalg.norm(rg[:3, 3]), 1e-6) for rg in rel_gt])
     rot = np.array([rotation_vector(e[:3, :3]) for e in errors])
     per_m = np.array([e[:3, 3] for e in errors]) / lengths[:, None]
@@ -89,17 +105,13 @@ def write_poses(path, poses):
             f.write(" ".join(f"{v:.9e}" for v in p[:3].reshape(-1)) + "\n")
 
 
-def true_rotations(gt):
-    """The true step rotations as rotation vectors (radians; x, y, z as in step_errors)."""
-    return np.array([rotation_vector((np.linalg.inv(gt[k - 1]) @ gt[k])[:3, :3])
-                     for k in range(1, len(gt))])
-
-
 def yaw_slopes(gt, est):
     """Per rotation axis: slope (in % of the true yaw) and its standard error of the steps'
-    rotation errors regressed on the steps' true yaw, with an intercept."""
+    rotation errors regressed on the steps' true yaw, with an intercept (the steps of
+    step_errors: those that move)."""
     _, _, rot = step_errors(gt, est)
-    yaw = np.degrees(true_rotations(gt)[:, 1]) * 1e3  # mdeg, as the errors
+    yaw = np.array([np.degrees(rotation_vector(rg[:3, :3])[1]) * 1e3  # mdeg, as the errors
+                    for rg, _, _ in step_pairs(gt, est) if moving(np.linalg.norm(rg[:3, 3]))])
     design = np.vstack([yaw, np.ones_like(yaw)]).T
     out = []
     for axis in range(3):
@@ -112,16 +124,11 @@ def yaw_slopes(gt, est):
 
 def step_errors(gt, est):
     """Arrays per step: scale % (n), translation error % of the step (n x 3), rotation mdeg (n x 3)."""
-    if len(gt) != len(est):
-        raise ValueError(f"{len(gt)} ground-truth poses, {len(est)} estimated")
     scale, trans, rot = [], [], []
-    for k in range(1, len(gt)):
-        rg = np.linalg.inv(gt[k - 1]) @ gt[k]
-        re = np.linalg.inv(est[k - 1]) @ est[k]
+    for rg, re, e in step_pairs(gt, est):
         d = np.linalg.norm(rg[:3, 3])
-        if d < 1e-6:
-            continue  # standing still: no scale to speak of
-        e = np.linalg.inv(rg) @ re
+        if not moving(d):
+            continue
         scale.append((np.linalg.norm(re[:3, 3]) / d - 1.0) * 100.0)
         trans.append(e[:3, 3] / d * 100.0)
         rot.append(np.degrees(rotation_vector(e[:3, :3])) * 1e3)

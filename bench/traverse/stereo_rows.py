@@ -11,7 +11,7 @@ search puts the right point on the left one's row, so only a build that settles 
 on both axes shows anything but zeros. Prints the count, mean, median and RMS, and the
 mean and RMS per quarter of the image's rows (top first).
 """
-import sys
+import argparse
 
 import numpy as np
 
@@ -19,10 +19,9 @@ from precision import read_model  # the runs' COLMAP images, by image id
 
 
 def main():
-    if len(sys.argv) < 2 or sys.argv[1] in ("-h", "--help"):
-        print(__doc__)
-        sys.exit(0 if len(sys.argv) > 1 else 2)
-    for run in sys.argv[1:]:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("runs", nargs="+", help="`phototraverse run` output directories")
+    for run in p.parse_args().runs:
         images = read_model(run)
         rows, dy = [], []
         for k in range(len(images) // 2):

@@ -419,10 +419,11 @@ fn filter(steps: &[([f64; 3], f64)], fixed: &[Option<([f64; 3], f64)>], q: f64) 
             let (s, factor) = steps[k - 1];
             let turned = fixed[k].is_none();
             let walks = turned && fixed[k - 1].is_none();
+            let white = q * factor;
             let step_var = if turned {
-                (q * factor).max(outage_step_variance(s))
+                white.max(outage_step_variance(s))
             } else {
-                q * factor
+                white
             };
             let (f, shift, process) = transition(s, step_var, turned, walks);
             let (x, p) = &pass.filtered[k - 1];
