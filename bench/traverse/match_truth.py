@@ -39,10 +39,17 @@ import sys
 import cv2
 import numpy as np
 
-H = 4  # the core's template half-size (`RefineConfig::half_window`)
-N = 2 * H + 1
-U, V = np.meshgrid(np.arange(N) - H, np.arange(N) - H)
-GRID = np.stack([U.ravel(), V.ravel()], 1).astype(float)
+H = N = GRID = None  # the template's half-size, side and sample offsets (`set_half`)
+
+
+def set_half(half):
+    global H, N, GRID
+    H, N = half, 2 * half + 1
+    u, v = np.meshgrid(np.arange(N) - H, np.arange(N) - H)
+    GRID = np.stack([u.ravel(), v.ravel()], 1).astype(float)
+
+
+set_half(4)  # the core's (`RefineConfig::half_window`)
 LAGS = [1, 2, 3, 5]
 
 
@@ -103,7 +110,7 @@ class Dataset:
         return np.array([self.f * xc[0] / xc[2] + self.cx, self.f * xc[1] / xc[2] + self.cy]), xc[2]
 
 
-def least_squares(img, tpl, start, offsets=GRID, iterations=30):
+def least_squares(img, tpl, start, offsets, iterations=30):
     """The core's least-squares model; the position where it settles, None where it leaves."""
     p = start.copy()
     gain, offset, rx, ry = 1.0, 0.0, 0.0, 0.0
@@ -266,7 +273,9 @@ def main():
     ap.add_argument("dataset", help="rendered with --depth (KITTI layout)")
     ap.add_argument("--anchors", required=True, help="anchor epochs, comma-separated")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--half", type=int, default=4, help="template half-size (default: the core's, 4)")
     args = ap.parse_args()
+    set_half(args.half)
     ds = Dataset(args.dataset)
     anchors = [int(a) for a in args.anchors.split(",")]
     report(measure(ds, anchors, np.random.default_rng(args.seed)))
