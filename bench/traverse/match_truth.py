@@ -4,8 +4,8 @@
 A check of temporal template matching itself, outside the traverse: for points of an
 anchor image of a dataset rendered with `--depth` (KITTI layout), the true position in
 each later image (the depth maps through `gt_poses.txt`) is compared with where
-least-squares matching finds a 9 x 9 template of the anchor. The least squares is the
-core's model (`core/src/matching/lsm.rs`): gain, offset and a brightness ramp solved with
+least-squares matching finds a 9 x 9 template of the anchor (`--half`). The least
+squares is the core's model (`core/src/matching/lsm.rs`): gain, offset and a brightness ramp solved with
 the shift, bilinear samples, central-difference gradients; it starts 0.3 px (uniform)
 off the truth and iterates to 1e-5 px. Templates:
 
@@ -39,6 +39,12 @@ import sys
 import cv2
 import numpy as np
 
+from precision import rig, to_world
+from steps import read_poses
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "sift"))
+from bench import read_pfm  # noqa: E402 (the SIFT bench's PFM reader)
+
 H = N = GRID = None  # the template's half-size, side and sample offsets (`set_half`)
 
 
@@ -51,15 +57,6 @@ def set_half(half):
 
 set_half(4)  # the core's (`RefineConfig::half_window`)
 LAGS = [1, 2, 3, 5]
-
-
-def read_pfm(path):
-    with open(path, "rb") as fh:
-        fh.readline()
-        w, h = map(int, fh.readline().split())
-        fh.readline()
-        a = np.frombuffer(fh.read(), dtype="<f4").reshape(h, w)
-    return a[::-1].astype(np.float64)
 
 
 def write_pfm(path, a):
@@ -81,10 +78,8 @@ def bilinear(img, x, y):
 class Dataset:
     def __init__(self, root):
         self.root = root
-        p0 = [l for l in open(os.path.join(root, "calib.txt")) if l.startswith("P0:")][0]
-        p = np.array(p0.split()[1:], float).reshape(3, 4)
-        self.f, self.cx, self.cy = p[0, 0], p[0, 2], p[1, 2]
-        self.poses = np.loadtxt(os.path.join(root, "gt_poses.txt")).reshape(-1, 3, 4)
+        self.f, self.cx, self.cy, _ = rig(root)
+        self.poses = read_poses(os.path.join(root, "gt_poses.txt"))
         self.images, self.depths = {}, {}
 
     def image(self, k):
@@ -102,11 +97,11 @@ class Dataset:
         """The object point seen at pixel (c, r) of image k (inverse depth interpolated:
         linear over a plane, as depth is not)."""
         z = 1.0 / bilinear(1.0 / self.depth(k), np.array([c]), np.array([r]))[0]
-        x = np.array([(c - self.cx) / self.f * z, (r - self.cy) / self.f * z, z])
-        return self.poses[k][:, :3] @ x + self.poses[k][:, 3]
+        return to_world(self.poses[k], c, r, z, self.f, self.cx, self.cy)
 
     def project(self, xw, k):
-        xc = self.poses[k][:, :3].T @ (xw - self.poses[k][:, 3])
+        """Pixel and depth of object point `xw` in image k."""
+        xc = self.poses[k][:3, :3].T @ (xw - self.poses[k][:3, 3])
         return np.array([self.f * xc[0] / xc[2] + self.cx, self.f * xc[1] / xc[2] + self.cy]), xc[2]
 
 
@@ -132,36 +127,37 @@ def least_squares(img, tpl, start, offsets, iterations=30):
 
 
 def templates(ds, a, k, at, truth, depth_ratio):
-    """The templates of anchor point `at` (image a) for image k, and the true affine map."""
+    """The templates of anchor point `at` (image a) for image k, each with the offsets
+    image k is sampled at around the match."""
     img_a = ds.image(a)
     anchor = bilinear(img_a, at[0] + GRID[:, 0], at[1] + GRID[:, 1])
     out = {}
     # The magnified anchor template, read within its own samples as the core does.
     x, y = H + GRID[:, 0] / depth_ratio, H + GRID[:, 1] / depth_ratio
     padded = np.pad(anchor.reshape(N, N), ((0, 1), (0, 1)), mode="edge")
-    out["iso"] = bilinear(padded, x, y)
+    out["iso"] = bilinear(padded, x, y), GRID
     # The exact warp: each sample's ray through image k's depth onto the anchor image.
     xw = [ds.point(k, truth[0] + q[0], truth[1] + q[1]) for q in GRID]
     pa = np.array([ds.project(x, a)[0] for x in xw])
     if np.all(np.isfinite(pa)):
-        out["exact"] = bilinear(img_a, pa[:, 0], pa[:, 1])
+        out["exact"] = bilinear(img_a, pa[:, 0], pa[:, 1]), GRID
     # The true local affine map (anchor offsets to image k offsets), by central differences.
     d = [ds.project(ds.point(a, at[0] + dc, at[1] + dr), k)[0] for dc, dr in ((1, 0), (-1, 0), (0, 1), (0, -1))]
     affine = np.stack([(d[0] - d[1]) / 2, (d[2] - d[3]) / 2], 1)
-    out["inverse"] = anchor
-    out["self"] = bilinear(ds.image(k), truth[0] + GRID[:, 0], truth[1] + GRID[:, 1])
-    return out, affine
+    out["inverse"] = anchor, GRID @ affine.T
+    out["self"] = bilinear(ds.image(k), truth[0] + GRID[:, 0], truth[1] + GRID[:, 1]), GRID
+    return out
 
 
 def measure(ds, anchors, rng):
     rows = {}
     for a in anchors:
         img_a, depth_a = ds.image(a), ds.depth(a)
+        h, w = img_a.shape
         corners = cv2.goodFeaturesToTrack(img_a.astype(np.uint8), 600, 0.01, 8)
         for c, r in corners[:, 0, :]:
             c, r = float(c) + rng.uniform(-0.5, 0.5), float(r) + rng.uniform(-0.5, 0.5)
             ci, ri = int(round(c)), int(round(r))
-            h, w = img_a.shape
             if not (20 < ci < w - 20 and 20 < ri < h - 20):
                 continue
             patch = depth_a[ri - 3 : ri + 4, ci - 3 : ci + 4]
@@ -169,7 +165,7 @@ def measure(ds, anchors, rng):
             if not np.all(np.isfinite(patch)) or patch.max() / patch.min() > 1.03:
                 continue
             xw = ds.point(a, c, r)
-            z_a = ds.poses[a][:, :3].T @ (xw - ds.poses[a][:, 3])
+            z_a = ds.project(xw, a)[1]
             for lag in LAGS:
                 k = a + lag
                 if k >= len(ds.poses):
@@ -177,16 +173,15 @@ def measure(ds, anchors, rng):
                 truth, z_k = ds.project(xw, k)
                 if not (25 < truth[0] < w - 25 and 25 < truth[1] < h - 25) or z_k <= 0:
                     continue
-                tpls, affine = templates(ds, a, k, (c, r), truth, z_a[2] / z_k)
+                tpls = templates(ds, a, k, (c, r), truth, z_a / z_k)
                 outward = truth - np.array([ds.cx, ds.cy])
                 outward /= np.linalg.norm(outward)
                 start = truth + rng.uniform(-0.3, 0.3, 2)
-                for name, tpl in tpls.items():
-                    offsets = GRID @ affine.T if name == "inverse" else GRID
+                for name, (tpl, offsets) in tpls.items():
                     p = least_squares(ds.image(k), tpl, start, offsets)
                     if p is not None:
                         e = p - truth
-                        rows.setdefault((name, lag), []).append((e @ outward, np.hypot(*e), z_a[2]))
+                        rows.setdefault((name, lag), []).append((e @ outward, np.hypot(*e), z_a))
     return rows
 
 
@@ -253,8 +248,10 @@ def render_plane(args):
         write_pfm(os.path.join(args.out, "depth_0", "%06d.pfm" % k), np.where(ok, t, np.inf))
     np.savetxt(os.path.join(args.out, "gt_poses.txt"),
                [[1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, float(k)] for k in range(args.frames)])
+    # A right camera only for the calibration's form (a base of 0.5 m): no right images.
     with open(os.path.join(args.out, "calib.txt"), "w") as fh:
         fh.write("P0: %g 0 %g 0 0 %g %g 0 0 0 1 0\n" % (f, cx, f, cy))
+        fh.write("P1: %g 0 %g %g 0 %g %g 0 0 0 1 0\n" % (f, cx, -0.5 * f, f, cy))
 
 
 def main():
