@@ -16,7 +16,8 @@ scene (about 3 s each for 100 epochs). Time is not measured here (`instructions.
 Prints, per scene, both builds' drift and rotation drift over the peer's (the issue's bars:
 at 640x480 at most 0.5 in translation and 1 in rotation, at 320x240 at most 1) and the mean
 scale error per step (`steps.py`); per scene kind and over all, the geometric means of the
-new build's drift over the baseline's; and the scenes past a bar with either build.
+new build's drift over the baseline's, over all with their standard errors; and the scenes
+past a bar with either build.
 `--env` sets environment variables of the new build's runs (for scratch switches of an
 experiment), `--baseline-env` those of the baseline's; without `--baseline-bin` the
 baseline is `--bin` itself.
@@ -62,6 +63,17 @@ def bars(scene):
 
 def geomean(xs):
     return math.exp(sum(math.log(x) for x in xs) / len(xs)) if xs else float("nan")
+
+
+def geomean_se(xs):
+    """The geometric mean's standard error, from the spread of the logs (delta method):
+    what a paired difference must exceed to be read as one."""
+    if len(xs) < 2:
+        return float("nan")
+    logs = [math.log(x) for x in xs]
+    mean = sum(logs) / len(logs)
+    sd = math.sqrt(sum((v - mean) ** 2 for v in logs) / (len(logs) - 1))
+    return math.exp(mean) * sd / math.sqrt(len(logs))
 
 
 def main():
@@ -120,8 +132,9 @@ def main():
         print(f"  {kind:24s} {geomean([r[4][0] for r in rs]):.3f} "
               f"{geomean([r[4][1] for r in rs]):.3f}   scale {sum(r[2][2] for r in rs) / len(rs):+.3f}"
               f" -> {sum(r[3][2] for r in rs) / len(rs):+.3f} %  ({len(rs)} runs)")
-    print(f"  {'all':24s} {geomean([r[4][0] for r in rows]):.3f} "
-          f"{geomean([r[4][1] for r in rows]):.3f}   ({len(rows)} runs)")
+    drift, rot = [r[4][0] for r in rows], [r[4][1] for r in rows]
+    print(f"  {'all':24s} {geomean(drift):.3f} {geomean(rot):.3f}   ({len(rows)} runs; "
+          f"standard errors {geomean_se(drift):.3f}, {geomean_se(rot):.3f})")
     for which, k in (("baseline", 2), ("new", 3)):
         past = [f"{r[1]} ({r[k][0]:.2f} / {r[k][1]:.2f})" for r in rows
                 if r[k][0] > bars(r[0])[0] or r[k][1] > bars(r[0])[1]]
