@@ -126,15 +126,24 @@ def least_squares(img, tpl, start, offsets, iterations=30):
     return p
 
 
-def templates(ds, a, k, at, truth, depth_ratio):
-    """The templates of anchor point `at` (image a) for image k, each with the offsets
-    image k is sampled at around the match."""
-    img_a = ds.image(a)
-    anchor = bilinear(img_a, at[0] + GRID[:, 0], at[1] + GRID[:, 1])
+class Anchor:
+    """What a point of anchor image `a` at pixel `at` gives every lag: its template
+    samples and the object points one pixel either side (the true local map's base)."""
+
+    def __init__(self, ds, a, at):
+        self.a = a
+        self.samples = bilinear(ds.image(a), at[0] + GRID[:, 0], at[1] + GRID[:, 1])
+        self.sides = [ds.point(a, at[0] + dc, at[1] + dr) for dc, dr in ((1, 0), (-1, 0), (0, 1), (0, -1))]
+
+
+def templates(ds, anchor, k, truth, depth_ratio):
+    """The templates of `anchor` for image k, each with the offsets image k is sampled
+    at around the match."""
+    a, img_a = anchor.a, ds.image(anchor.a)
     out = {}
     # The magnified anchor template, read within its own samples as the core does.
     x, y = H + GRID[:, 0] / depth_ratio, H + GRID[:, 1] / depth_ratio
-    padded = np.pad(anchor.reshape(N, N), ((0, 1), (0, 1)), mode="edge")
+    padded = np.pad(anchor.samples.reshape(N, N), ((0, 1), (0, 1)), mode="edge")
     out["iso"] = bilinear(padded, x, y), GRID
     # The exact warp: each sample's ray through image k's depth onto the anchor image.
     xw = [ds.point(k, truth[0] + q[0], truth[1] + q[1]) for q in GRID]
@@ -142,9 +151,9 @@ def templates(ds, a, k, at, truth, depth_ratio):
     if np.all(np.isfinite(pa)):
         out["exact"] = bilinear(img_a, pa[:, 0], pa[:, 1]), GRID
     # The true local affine map (anchor offsets to image k offsets), by central differences.
-    d = [ds.project(ds.point(a, at[0] + dc, at[1] + dr), k)[0] for dc, dr in ((1, 0), (-1, 0), (0, 1), (0, -1))]
+    d = [ds.project(x, k)[0] for x in anchor.sides]
     affine = np.stack([(d[0] - d[1]) / 2, (d[2] - d[3]) / 2], 1)
-    out["inverse"] = anchor, GRID @ affine.T
+    out["inverse"] = anchor.samples, GRID @ affine.T
     out["self"] = bilinear(ds.image(k), truth[0] + GRID[:, 0], truth[1] + GRID[:, 1]), GRID
     return out
 
@@ -166,6 +175,7 @@ def measure(ds, anchors, rng):
                 continue
             xw = ds.point(a, c, r)
             z_a = ds.project(xw, a)[1]
+            anchor = None  # taken at the first lag that keeps the point in view
             for lag in LAGS:
                 k = a + lag
                 if k >= len(ds.poses):
@@ -173,7 +183,8 @@ def measure(ds, anchors, rng):
                 truth, z_k = ds.project(xw, k)
                 if not (25 < truth[0] < w - 25 and 25 < truth[1] < h - 25) or z_k <= 0:
                     continue
-                tpls = templates(ds, a, k, (c, r), truth, z_a / z_k)
+                anchor = anchor or Anchor(ds, a, (c, r))
+                tpls = templates(ds, anchor, k, truth, z_a / z_k)
                 outward = truth - np.array([ds.cx, ds.cy])
                 outward /= np.linalg.norm(outward)
                 start = truth + rng.uniform(-0.3, 0.3, 2)

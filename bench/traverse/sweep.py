@@ -70,10 +70,9 @@ def geomean_se(xs):
     what a paired difference must exceed to be read as one."""
     if len(xs) < 2:
         return float("nan")
-    logs = [math.log(x) for x in xs]
-    mean = sum(logs) / len(logs)
-    sd = math.sqrt(sum((v - mean) ** 2 for v in logs) / (len(logs) - 1))
-    return math.exp(mean) * sd / math.sqrt(len(logs))
+    g = geomean(xs)
+    sd = math.sqrt(sum(math.log(x / g) ** 2 for x in xs) / (len(xs) - 1))
+    return g * sd / math.sqrt(len(xs))
 
 
 def main():
